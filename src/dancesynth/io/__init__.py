@@ -1,0 +1,1 @@
+"""File boundaries: BVH motion, audio decoding, atomic writes."""

@@ -1,0 +1,155 @@
+"""The data types that flow through dancesynth, defined once.
+
+Conventions (see DESIGN.md):
+- Y is up, lengths are metres, times are seconds (``_s``), frame counts ``_frames``.
+- Rotations are unit quaternions in SciPy's order (x, y, z, w); Euler angles exist
+  only at file boundaries.
+- Arrays are structure-of-arrays with frames as the leading axis.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
+POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
+
+
+@dataclass(frozen=True, eq=False)
+class Skeleton:
+    """A joint hierarchy as a BVH file describes it.
+
+    ``parents[j] < j`` for every joint but the root (``parents[0] == -1``).
+    ``channels[j]`` keeps the channel names in file order, so a skeleton read from a
+    BVH file is written back with the same layout. ``end_sites`` maps a joint index
+    to the offset of its End Site.
+    """
+
+    names: tuple[str, ...]
+    parents: np.ndarray
+    offsets: np.ndarray
+    channels: tuple[tuple[str, ...], ...]
+    end_sites: dict[int, np.ndarray] = field(default_factory=dict)
+
+    def __post_init__(self):
+        parents = np.asarray(self.parents, dtype=np.int64)
+        offsets = np.asarray(self.offsets, dtype=np.float64).reshape(-1, 3)
+        object.__setattr__(self, "parents", parents)
+        object.__setattr__(self, "offsets", offsets)
+        n = len(self.names)
+        if parents.shape != (n,) or offsets.shape != (n, 3) or len(self.channels) != n:
+            raise ValueError("Skeleton arrays disagree on the number of joints")
+        if n == 0 or parents[0] != -1 or np.any(parents[1:] < 0) or np.any(parents[1:] >= np.arange(1, n)):
+            raise ValueError("Skeleton parents must be topologically ordered with the root first")
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.names)
+
+    def index(self, name: str) -> int:
+        return self.names.index(name)
+
+    def rotation_order(self, joint: int) -> str:
+        """Intrinsic Euler order of a joint's rotation channels, e.g. ``"ZXY"``."""
+        order = "".join(c[0] for c in self.channels[joint] if c in ROTATION_CHANNELS)
+        return order or "ZXY"
+
+    def has_position_channels(self, joint: int) -> bool:
+        return any(c in POSITION_CHANNELS for c in self.channels[joint])
+
+    def children(self, joint: int) -> np.ndarray:
+        return np.flatnonzero(self.parents == joint)
+
+    def scaled(self, factor: float) -> "Skeleton":
+        """The same skeleton with every length multiplied by ``factor``."""
+        return Skeleton(self.names, self.parents, self.offsets * factor, self.channels,
+                        {j: o * factor for j, o in self.end_sites.items()})
+
+    def same_topology(self, other: "Skeleton") -> bool:
+        return self.names == other.names and np.array_equal(self.parents, other.parents)
+
+
+@dataclass(eq=False)
+class MotionClip:
+    """Motion of one skeleton sampled at a fixed frame rate.
+
+    ``local_pos`` is only present when joints other than the root carry animated
+    position channels; otherwise each joint sits at its skeleton offset.
+    ``contacts`` marks frames where the (left, right) foot is planted.
+    ``meta`` carries provenance: source clips, beat frames, transitions.
+    """
+
+    skeleton: Skeleton
+    fps: float
+    root_pos: np.ndarray
+    local_rot: np.ndarray
+    local_pos: np.ndarray | None = None
+    contacts: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.root_pos = np.asarray(self.root_pos, dtype=np.float64)
+        self.local_rot = np.asarray(self.local_rot, dtype=np.float64)
+        f, j = self.local_rot.shape[:2]
+        if self.local_rot.shape != (f, j, 4) or j != self.skeleton.n_joints:
+            raise ValueError(f"local_rot must be (frames, {self.skeleton.n_joints}, 4), got {self.local_rot.shape}")
+        if self.root_pos.shape != (f, 3):
+            raise ValueError(f"root_pos must be ({f}, 3), got {self.root_pos.shape}")
+        if self.local_pos is not None and np.shape(self.local_pos) != (f, j, 3):
+            raise ValueError("local_pos must be (frames, joints, 3)")
+        if self.contacts is not None and np.shape(self.contacts) != (f, 2):
+            raise ValueError("contacts must be (frames, 2)")
+        if not self.fps > 0:
+            raise ValueError("fps must be positive")
+
+    @property
+    def n_frames(self) -> int:
+        return self.local_rot.shape[0]
+
+    @property
+    def duration_s(self) -> float:
+        """Time from the first to the last frame."""
+        return max(self.n_frames - 1, 0) / self.fps
+
+    def frames(self, start: int, stop: int) -> "MotionClip":
+        """Frames ``start:stop`` as a new clip (metadata is not sliced)."""
+        sl = slice(start, stop)
+        return MotionClip(
+            self.skeleton, self.fps, self.root_pos[sl], self.local_rot[sl],
+            None if self.local_pos is None else self.local_pos[sl],
+            None if self.contacts is None else self.contacts[sl], dict(self.meta))
+
+
+@dataclass(eq=False)
+class MusicFeatures:
+    """What the synthesis engines know about a piece of music.
+
+    ``beat_times_s`` are the music's beats; ``intensity_db`` is the sound pressure
+    level of each beat interval (``len(beat_times_s) - 1`` values), the music
+    intensity of Xu et al. ``beat_confidence`` says how clearly the audio pulses
+    (see ``dancesynth.music``); ``default_tempo`` is set when no clear beat was found
+    and the beats are a steady grid at a stated tempo instead.
+    """
+
+    duration_s: float
+    beat_times_s: np.ndarray
+    intensity_db: np.ndarray
+    tempo_bpm: float
+    beat_confidence: float = 1.0
+    default_tempo: bool = False
+    source: str = ""
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.beat_times_s = np.asarray(self.beat_times_s, dtype=np.float64)
+        self.intensity_db = np.asarray(self.intensity_db, dtype=np.float64)
+        if self.beat_times_s.ndim != 1 or np.any(np.diff(self.beat_times_s) <= 0):
+            raise ValueError("beat_times_s must be strictly increasing")
+        if self.intensity_db.shape != (max(len(self.beat_times_s) - 1, 0),):
+            raise ValueError("intensity_db needs one value per beat interval")
+
+    @property
+    def n_beats(self) -> int:
+        return len(self.beat_times_s)

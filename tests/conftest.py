@@ -1,0 +1,29 @@
+"""Shared test fixtures: where the bundled and the shared data live."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+PACKAGE_DATA = REPO / "src" / "dancesynth" / "data"
+BUNDLED_MUSIC = PACKAGE_DATA / "music"
+# The team's shared data folder sits beside the repository; CI machines have it too.
+SHARED = Path(os.environ.get("DANCESYNTH_SHARED", REPO.parent / "shared"))
+SHARED_MOCAP = SHARED / "data" / "mocap"
+
+os.environ.setdefault("NUMBA_CACHE_DIR", str(REPO / ".cache" / "numba"))
+
+
+def shared_mocap_files():
+    return sorted(SHARED_MOCAP.glob("*/*.bvh")) if SHARED_MOCAP.is_dir() else []
+
+
+requires_shared = pytest.mark.skipif(not SHARED_MOCAP.is_dir(), reason=f"shared mocap not found at {SHARED_MOCAP}")
+
+
+@pytest.fixture(scope="session")
+def bundled_song():
+    return BUNDLED_MUSIC / "Kevin_MacLeod_-_Vibe_Ace.ogg"
