@@ -36,7 +36,7 @@ def apply(q, v) -> np.ndarray:
     q = np.asarray(q, dtype=np.float64)
     v = np.asarray(v, dtype=np.float64)
     shape = np.broadcast_shapes(q.shape[:-1], v.shape[:-1])
-    return _R(np.broadcast_to(q, shape + (4,))).apply(np.broadcast_to(v, shape + (3,)))
+    return _R(np.broadcast_to(q, shape + (4,)).copy()).apply(np.broadcast_to(v, shape + (3,)).copy())
 
 
 def log(q) -> np.ndarray:

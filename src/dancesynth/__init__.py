@@ -1,0 +1,33 @@
+"""dancesynth: make a 3D character dance to music.
+
+    >>> import dancesynth
+    >>> clip = dancesynth.dance("song.ogg", style="salsa")
+    >>> dancesynth.write_bvh("song.bvh", clip)
+
+Heavy dependencies (librosa) load on first use, so ``import dancesynth`` stays light.
+"""
+
+from .errors import DanceSynthError, InputError, ModelError, SynthesisError
+from .types import MotionClip, MusicFeatures, Skeleton
+
+__version__ = "0.1.0"
+
+__all__ = ["dance", "list_styles", "read_bvh", "write_bvh", "analyze_music", "open_database",
+           "MotionClip", "MusicFeatures", "Skeleton",
+           "DanceSynthError", "InputError", "ModelError", "SynthesisError"]
+
+
+def __getattr__(name):
+    if name in ("dance", "list_styles", "DanceConfig"):
+        from . import api
+        return getattr(api, name)
+    if name in ("read_bvh", "write_bvh"):
+        from .io import bvh
+        return getattr(bvh, name)
+    if name == "analyze_music":
+        from .music import analyze_music
+        return analyze_music
+    if name == "open_database":
+        from .motion.database import open_database
+        return open_database
+    raise AttributeError(f"module 'dancesynth' has no attribute '{name}'")

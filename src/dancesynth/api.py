@@ -1,0 +1,154 @@
+"""The library's front door: one call from a song to a dance."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .engines.beatgrid import BeatGrid, beat_grid, choose_style
+from .engines.graph.cache import load_graph
+from .engines.graph.engine import EngineConfig, GraphEngine, MusicSegment, SegmentFrames
+from .engines.graph.meta_graph import GraphConfig
+from .errors import InputError
+from .motion.database import MotionDatabase, open_database
+from .types import MotionClip, MusicFeatures
+
+ENGINES = ("streaming", "global")
+FALLBACK_BPM = 100.0  # the tempo we dance at when the music has no clear beat
+
+
+@dataclass(frozen=True)
+class DanceConfig:
+    """Everything ``dance`` can be told, with the defaults in one place."""
+
+    style: str | None = None
+    engine: str = "streaming"
+    segment_s: float = 5.0
+    fps: float = 30.0
+    seed: int | None = None
+    max_duration_s: float = 15 * 60.0
+    graph: GraphConfig = field(default_factory=GraphConfig)
+    render: EngineConfig = field(default_factory=lambda: EngineConfig(repeat_penalty=0.5))
+
+    def __post_init__(self):
+        if self.engine not in ENGINES:
+            raise InputError(f"unknown engine '{self.engine}': use one of {', '.join(ENGINES)}")
+        if not 0.5 <= self.segment_s <= 600:
+            raise InputError(f"segment length {self.segment_s} s is out of range: use 0.5 to 600 seconds")
+        if not 1 <= self.fps <= 240:
+            raise InputError(f"frame rate {self.fps} is out of range: use 1 to 240 fps")
+
+
+Progress = Callable[[str, int, int], None]
+
+
+def segment_bounds(times_s: np.ndarray, segment_s: float) -> list[tuple[int, int]]:
+    """Cut a beat grid into segments of at most ``segment_s`` (at least one interval each)."""
+    bounds, b, last = [], 0, len(times_s) - 1
+    while b < last:
+        e = int(np.searchsorted(times_s, times_s[b] + segment_s + 1e-9, side="right") - 1)
+        e = min(max(e, b + 1), last)
+        bounds.append((b, e))
+        b = e
+    return bounds
+
+
+def synthesise(engine: GraphEngine, grid: BeatGrid, duration_s: float, config: DanceConfig,
+               progress: Progress | None = None) -> tuple[list[SegmentFrames], dict]:
+    """Run the chosen engine over a beat grid; returns the rendered segments and step timings."""
+    if config.engine == "global":
+        t = time.perf_counter()
+        out = [engine.run_global(grid.times_s, grid.intensity_db, duration_s, seed=config.seed)]
+        return out, {"segments": 1, "step_s": [time.perf_counter() - t]}
+    state = engine.initial_state(config.seed)
+    bounds = segment_bounds(grid.times_s, config.segment_s)
+    out, step_s = [], []
+    for i, (b, e) in enumerate(bounds):
+        last = i == len(bounds) - 1
+        seg = MusicSegment(grid.times_s[b:e + 1], grid.intensity_db[b:e],
+                           remaining_beats=grid.n_intervals - e, end_s=duration_s if last else None)
+        t = time.perf_counter()
+        state, frames = engine.step(state, seg)
+        step_s.append(time.perf_counter() - t)
+        out.append(frames)
+        if progress:
+            progress("synthesis", i + 1, len(bounds))
+    return out, {"segments": len(bounds), "step_s": step_s}
+
+
+def analyse(song, max_duration_s: float = 15 * 60.0) -> MusicFeatures:
+    from .music import analyze_music  # librosa is heavy: import on first use
+
+    return analyze_music(path=song, fallback_bpm=FALLBACK_BPM, max_duration_s=max_duration_s)
+
+
+def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase | str | Path | None = None,
+          progress: Progress | None = None, **overrides) -> MotionClip:
+    """Make a dance for ``song`` (a path to an audio file, or ``MusicFeatures``).
+
+    Keyword overrides are ``DanceConfig`` fields, e.g. ``dance("song.ogg", style="salsa")``.
+    Returns a ``MotionClip`` on the chosen style's skeleton; ``clip.meta["summary"]``
+    says what was done (tempo, beats, style, segments, time per stage).
+    """
+    if config is None:
+        config = DanceConfig(**overrides)
+    elif overrides:
+        config = replace(config, **overrides)
+    timings = {}
+    t = time.perf_counter()
+    music = song if isinstance(song, MusicFeatures) else analyse(song, config.max_duration_s)
+    timings["music_s"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    db = database if isinstance(database, MotionDatabase) else open_database(database)
+    style, subdivide = choose_style(db, music.tempo_bpm, config.style)
+    timings["database_s"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    graph, cached = load_graph(style, config.graph)
+    timings["graph_s"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    grid = beat_grid(music, subdivide=subdivide)
+    engine = GraphEngine(style, graph, config.render)
+    segments, stats = synthesise(engine, grid, music.duration_s, config, progress)
+    timings["synthesis_s"] = time.perf_counter() - t
+
+    local = np.concatenate([s.local_rot for s in segments])
+    root = np.concatenate([s.root_pos for s in segments])
+    contacts = np.concatenate([s.contacts for s in segments])
+    jumps = np.concatenate([s.pieces.t0[s.pieces.jump] for s in segments])
+    summary = {
+        "song": music.source if isinstance(song, MusicFeatures) else str(song),
+        "duration_s": music.duration_s, "tempo_bpm": music.tempo_bpm, "beats": music.n_beats,
+        "beat_confidence": music.beat_confidence, "default_tempo": music.default_tempo,
+        "style": style.name, "subdivide": subdivide, "engine": config.engine,
+        "segments": stats["segments"], "segment_s": config.segment_s, "transitions": int(len(jumps)),
+        "graph_nodes": graph.n_nodes, "graph_mean_in_degree": graph.mean_in_degree, "graph_cached": cached,
+        "frames": len(local), "fps": config.fps, "timings_s": timings,
+        "step_s_median": float(np.median(stats["step_s"])), "step_s_max": float(np.max(stats["step_s"])),
+    }
+    meta = {
+        "summary": summary,
+        "music_beat_times_s": music.beat_times_s,
+        "grid_times_s": grid.times_s,
+        "transition_times_s": jumps,
+        "source_frames": np.concatenate([s.source_pos for s in segments]),
+        "warp_rates": np.concatenate([(s.pieces.f1 - s.pieces.f0) / (s.pieces.t1 - s.pieces.t0) / style.fps
+                                      for s in segments]),
+        "style": style.name,
+    }
+    return MotionClip(style.skeleton, config.fps, root, local, contacts=contacts, meta=meta)
+
+
+def list_styles(database: MotionDatabase | str | Path | None = None) -> list[dict]:
+    """The styles of a database: name, genre, tempo range, clips, minutes, skeleton."""
+    db = database if isinstance(database, MotionDatabase) else open_database(database)
+    return [{"name": s.name, "genre": s.genre, "tempo_min_bpm": s.tempo_range_bpm[0],
+             "tempo_max_bpm": s.tempo_range_bpm[1], "clips": s.n_clips, "minutes": s.duration_s / 60.0,
+             "beats": len(s.beat_frames), "joints": s.skeleton.n_joints, "fps": s.fps}
+            for s in sorted(db.styles.values(), key=lambda s: s.name)]

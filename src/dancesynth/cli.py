@@ -1,0 +1,160 @@
+"""Command line: thin wrappers that parse, call one library function and report."""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+import click
+
+from .errors import DanceSynthError, InputError
+
+
+def _setup_env() -> None:
+    # librosa JIT-compiles with numba; a persistent cache saves seconds on every later run.
+    from .motion.database import cache_dir
+
+    os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_dir() / "numba"))
+
+
+class _Progress:
+    """A tqdm bar per stage on stderr (quiet when asked or when stderr is not a terminal)."""
+
+    def __init__(self, enabled: bool):
+        self.enabled = enabled
+        self.bars = {}
+
+    def __call__(self, stage: str, done: int, total: int):
+        if not self.enabled:
+            return
+        from tqdm import tqdm
+
+        bar = self.bars.get(stage)
+        if bar is None:
+            bar = self.bars[stage] = tqdm(total=total, desc=stage, unit="seg", leave=False, file=sys.stderr)
+        bar.update(done - bar.n)
+        if done >= total:
+            bar.close()
+
+    def close(self):
+        for bar in self.bars.values():
+            bar.close()
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="dancesynth")
+def cli():
+    """Make a 3D character dance to music."""
+
+
+@cli.command()
+@click.argument("song", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
+              help="BVH file to write (default: the song's name with .bvh, here).")
+@click.option("--style", help="Style or genre to dance (see 'dancesynth styles'); default: best tempo match.")
+@click.option("--engine", type=click.Choice(["streaming", "global"]), default="streaming", show_default=True,
+              help="streaming: segment by segment as music arrives (Xu et al.); global: whole-song DP baseline.")
+@click.option("--segment-seconds", type=float, default=5.0, show_default=True, help="Streaming segment length.")
+@click.option("--fps", type=float, default=30.0, show_default=True, help="Frame rate of the output.")
+@click.option("--seed", type=int, default=None, help="Vary the dance between runs (default: deterministic).")
+@click.option("--database", type=click.Path(file_okay=False, path_type=Path),
+              help="A database folder or a folder of BVH files (default: the bundled database).")
+@click.option("--max-minutes", type=float, default=15.0, show_default=True, help="Refuse longer songs.")
+@click.option("-q", "--quiet", is_flag=True, help="No summary and no progress bar.")
+def dance(song, output, style, engine, segment_seconds, fps, seed, database, max_minutes, quiet):
+    """Make a beat-synchronised dance for SONG (wav, ogg, flac, mp3, ...) and write it as BVH."""
+    from .api import DanceConfig, dance as make_dance
+    from .io.bvh import write_bvh
+
+    output = output or Path(song.stem + ".bvh")
+    if output.suffix.lower() != ".bvh":
+        raise InputError(f"output {output} must end in .bvh")
+    config = DanceConfig(style=style, engine=engine, segment_s=segment_seconds, fps=fps, seed=seed,
+                         max_duration_s=max_minutes * 60.0)
+    progress = _Progress(enabled=not quiet and sys.stderr.isatty())
+    t0 = time.perf_counter()
+    try:
+        clip = make_dance(song, config=config, database=database, progress=progress)
+    finally:
+        progress.close()
+    t = time.perf_counter()
+    write_bvh(output, clip)
+    s = clip.meta["summary"]
+    s["timings_s"]["write_s"] = time.perf_counter() - t
+    if quiet:
+        return
+    tm = s["timings_s"]
+    note = " (no clear beat: dancing at a steady default tempo)" if s["default_tempo"] else ""
+    click.echo(f"song      {song}  {s['duration_s']:.1f} s")
+    click.echo(f"tempo     {s['tempo_bpm']:.1f} bpm, {s['beats']} beats{note}")
+    click.echo(f"style     {s['style']}" + (f" (dancing double time)" if s["subdivide"] > 1 else ""))
+    click.echo(f"engine    {s['engine']}: {s['segments']} segment(s) of {s['segment_s']:g} s, "
+               f"{s['transitions']} transitions, median {s['step_s_median'] * 1e3:.1f} ms per segment")
+    click.echo(f"time      music {tm['music_s']:.2f} s, database {tm['database_s']:.2f} s, graph "
+               f"{tm['graph_s']:.2f} s{' (cached)' if s['graph_cached'] else ''}, synthesis "
+               f"{tm['synthesis_s']:.2f} s, write {tm['write_s']:.2f} s; total {time.perf_counter() - t0:.2f} s")
+    click.echo(f"wrote     {output} ({s['frames']} frames at {s['fps']:g} fps)")
+
+
+@cli.command()
+@click.option("--database", type=click.Path(file_okay=False, path_type=Path),
+              help="A database folder or a folder of BVH files (default: the bundled database).")
+def styles(database):
+    """List the styles of a dance database with their tempo ranges and sizes."""
+    from .api import list_styles
+
+    rows = list_styles(database)
+    click.echo(f"{'style':<22}{'genre':<10}{'tempo (bpm)':>14}{'clips':>7}{'minutes':>9}{'beats':>7}{'joints':>8}")
+    for r in rows:
+        click.echo(f"{r['name']:<22}{r['genre']:<10}{r['tempo_min_bpm']:>7.0f}-{r['tempo_max_bpm']:<6.0f}"
+                   f"{r['clips']:>7}{r['minutes']:>9.1f}{r['beats']:>7}{r['joints']:>8}")
+
+
+@cli.command("build-db")
+@click.argument("source", type=click.Path(file_okay=False, path_type=Path))
+@click.option("-o", "--output", type=click.Path(file_okay=False, path_type=Path), required=True,
+              help="Folder to write the database to.")
+def build_db(source, output):
+    """Analyse a folder of BVH files (one sub-folder per genre, or a genres.toml) into a database."""
+    from .motion.database import build_database, collect_sources, save_database
+
+    sources = collect_sources(source)
+    with click.progressbar(length=len(sources), label="analysing", file=sys.stderr) as bar:
+        db = build_database(sources, progress=lambda _: bar.update(1))
+    db.source = str(source)
+    save_database(db, output)
+    click.echo(f"wrote {output}: {len(db.styles)} styles from {len(sources)} files")
+
+
+def main(argv=None) -> int:
+    _setup_env()
+    try:
+        cli.main(args=argv, prog_name="dancesynth", standalone_mode=False)
+    except click.exceptions.Abort:
+        click.echo("interrupted", err=True)
+        return 130
+    except click.ClickException as exc:
+        exc.show()
+        return exc.exit_code
+    except InputError as exc:
+        click.echo(f"error: {exc}", err=True)
+        return 2
+    except DanceSynthError as exc:
+        click.echo(f"error: {exc}", err=True)
+        return 1
+    except KeyboardInterrupt:
+        click.echo("interrupted", err=True)
+        return 130
+    except Exception as exc:  # never a traceback for users; keep it one line and say how to get more
+        if os.environ.get("DANCESYNTH_DEBUG"):
+            raise
+        click.echo(f"internal error: {type(exc).__name__}: {exc} (please report it; set DANCESYNTH_DEBUG=1 "
+                   "for the traceback)", err=True)
+        return 70
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

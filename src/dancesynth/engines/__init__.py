@@ -1,0 +1,1 @@
+"""Synthesis engines. Each turns MusicFeatures (+ a motion database) into motion."""

@@ -1,0 +1,140 @@
+"""The streaming meta-motion-graph engine (§3.3) and its global-DP baseline.
+
+Streaming: music arrives as segments of beats. For each segment the engine runs the
+path search from the previous segment's last node (InitS for the first), with music
+intensities standardised by what has been heard so far, ending at a node whose
+capacity covers the music still to come (THC), and renders the segment. ``step`` is
+pure: it returns a new state and the segment's frames; offline synthesis runs the
+same step over a whole song.
+
+Global (the authors' earlier, offline method, our baseline): one search over the
+whole song with intensities standardised over the whole song.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ...motion.database import Style
+from ..stitch import Pieces, StitchState, render
+from .meta_graph import MetaMotionGraph
+from .search import Path, search
+
+
+@dataclass(frozen=True)
+class MusicSegment:
+    """K beat intervals of music: ``beat_times_s`` (K+1,) -- the first is the previous
+    segment's last beat -- and their intensities (K,) in dB.
+
+    ``remaining_beats`` is how many beats follow this segment, when known (THC);
+    ``end_s`` marks the last segment and says up to when to render.
+    """
+
+    beat_times_s: np.ndarray
+    intensity_db: np.ndarray
+    remaining_beats: int | None = None
+    end_s: float | None = None
+
+
+@dataclass(frozen=True)
+class EngineConfig:
+    fps: float = 30.0
+    blend_s: float = 0.3              # inertialization time at a jump
+    repeat_penalty: float = 0.0       # cost of revisiting a recently danced beat (0 = paper)
+    repeat_half_life_beats: float = 32.0
+
+
+@dataclass(frozen=True)
+class StreamState:
+    node: int | None = None             # the last node of the previous segment
+    prev_duration_s: float | None = None  # its last beat interval (for eq. 6)
+    n_heard: int = 0                    # running statistics of music intensity (Welford)
+    mean_db: float = 0.0
+    m2_db: float = 0.0
+    start_costs: np.ndarray | None = None  # seeded preference among InitS
+    recent: np.ndarray | None = None       # (N,) decayed visit counts, for repeat_penalty
+    stitch: StitchState = field(default_factory=StitchState)
+    segments: int = 0
+
+
+@dataclass(frozen=True)
+class SegmentFrames:
+    """Frames rendered for one segment, with what produced them."""
+
+    local_rot: np.ndarray
+    root_pos: np.ndarray
+    contacts: np.ndarray
+    source_pos: np.ndarray
+    path: Path
+    pieces: Pieces
+
+
+def standardise(values: np.ndarray, mean: float, std: float) -> np.ndarray:
+    return (values - mean) / std if std > 1e-9 else np.zeros_like(values)
+
+
+def pieces_from_path(graph: MetaMotionGraph, path: Path, beat_times_s: np.ndarray) -> Pieces:
+    f0 = graph.node_frame[path.via].astype(np.float64)
+    f1 = graph.node_frame[path.nodes[1:]].astype(np.float64)
+    return Pieces(beat_times_s[:-1].astype(float), beat_times_s[1:].astype(float), f0, f1, path.jump.copy())
+
+
+@dataclass(frozen=True)
+class GraphEngine:
+    style: Style
+    graph: MetaMotionGraph
+    config: EngineConfig = EngineConfig()
+
+    def initial_state(self, seed: int | None = None) -> StreamState:
+        """Fresh state; a seed gives each InitS clip a random head start (variety between runs)."""
+        costs = None
+        if seed is not None:
+            costs = np.random.default_rng(seed).uniform(0.0, 1.0, len(self.graph.init_nodes))
+        return StreamState(start_costs=costs)
+
+    def step(self, state: StreamState, segment: MusicSegment) -> tuple[StreamState, SegmentFrames]:
+        """Synthesise and render one music segment."""
+        beats = np.asarray(segment.beat_times_s, dtype=np.float64)
+        inten = np.asarray(segment.intensity_db, dtype=np.float64)
+        n, mean, m2 = state.n_heard, state.mean_db, state.m2_db
+        for x in inten:  # Welford: the statistics of all music heard so far
+            n += 1
+            d = x - mean
+            mean += d / n
+            m2 += d * (x - mean)
+        std = np.sqrt(m2 / n) if n else 0.0
+        if state.node is None:
+            start, costs = self.graph.init_nodes, state.start_costs
+        else:
+            start, costs = np.array([state.node]), None
+        thc = np.inf if segment.remaining_beats is None else float(segment.remaining_beats)
+        recent = state.recent if state.recent is not None else np.zeros(self.graph.n_nodes)
+        penalty = self.config.repeat_penalty * recent if self.config.repeat_penalty > 0 else None
+        path = search(self.graph, standardise(inten, mean, std), np.diff(beats), start_nodes=start,
+                      prev_duration_s=state.prev_duration_s, thc=thc, start_costs=costs, node_penalty=penalty)
+        decay = 0.5 ** (1.0 / self.config.repeat_half_life_beats)
+        recent = recent * decay ** len(inten)
+        np.add.at(recent, path.nodes[1:], decay ** np.arange(len(inten) - 1, -1, -1))
+        pieces = pieces_from_path(self.graph, path, beats)
+        last = segment.end_s is not None
+        stitch, local, root, contacts, src = render(
+            self.style, pieces, state.stitch, fps=self.config.fps,
+            end_s=segment.end_s if last else float(beats[-1]), blend_s=self.config.blend_s, inclusive_end=last)
+        new_state = replace(state, node=int(path.nodes[-1]), prev_duration_s=float(beats[-1] - beats[-2]),
+                            n_heard=n, mean_db=mean, m2_db=m2, stitch=stitch, segments=state.segments + 1,
+                            recent=recent)
+        return new_state, SegmentFrames(local, root, contacts, src, path, pieces)
+
+    def run_global(self, beat_times_s: np.ndarray, intensity_db: np.ndarray, end_s: float,
+                   seed: int | None = None) -> SegmentFrames:
+        """The global-DP baseline: one search over the whole song, then one render."""
+        inten = np.asarray(intensity_db, dtype=np.float64)
+        state = self.initial_state(seed)
+        path = search(self.graph, standardise(inten, inten.mean(), inten.std()), np.diff(beat_times_s),
+                      start_nodes=self.graph.init_nodes, thc=0.0, start_costs=state.start_costs)
+        pieces = pieces_from_path(self.graph, path, np.asarray(beat_times_s, dtype=np.float64))
+        _, local, root, contacts, src = render(self.style, pieces, state.stitch, fps=self.config.fps,
+                                               end_s=end_s, blend_s=self.config.blend_s, inclusive_end=True)
+        return SegmentFrames(local, root, contacts, src, path, pieces)

@@ -1,0 +1,307 @@
+"""Meta motion graphs (Xu, Takagi & Kawada, §3.2).
+
+Nodes are the beat frames of one style. Two successive beat frames of a clip are
+joined by a *mono-directional* edge weighted by the motion intensity between them
+(total kinetic energy). Two similar beat frames are joined by a *bi-directional*
+edge when, by eq. (1),
+
+    rd = d(i, j) / (d(i-1, i+1) + d(j-1, j+1)) < THS,
+
+with the frame distance of eq. (3), ``d = sum_m w_m ||log(q_j,m^-1 q_i,m)||^2``; its
+weight is ``w2 = max(rd, THR)`` (eq. 2). A bi-directional edge takes no time and is
+always followed by a mono-directional edge, so the graph the search walks has one
+*step* per music beat: a mono edge, or a jump plus the mono edge after it.
+
+Each node carries its *synchronization capacity* (node weight): 0 for an end node,
+infinite for a node that can reach a cycle, otherwise 1 + the best successor, in
+beats.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import breadth_first_order, connected_components
+
+from ... import rotations as rot
+from ...motion.database import Style
+
+GRAPH_FORMAT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class GraphConfig:
+    """Parameters of graph construction; paper values where the paper gives them."""
+
+    ths: float = 3.0            # eq. (1): bi-directional edge when rd < THS (paper: 3.0)
+    thr: float = 1.5            # eq. (2): floor of the bi-directional weight, must be > 1
+    min_jump_beats: int = 4     # no jump between beats of one clip closer than this (0 = paper);
+                                # stops the search looping on one beat
+    close_dead_ends: bool = True  # if no start node can go on forever, give every end node
+                                  # its most similar beat as an extra edge (see build_graph)
+    max_joint_speed_deg_s: float = 1500.0  # beat intervals where a limb turns faster than this
+                                           # hold capture glitches (wrist flips) and are not played
+
+    def __post_init__(self):
+        if not self.thr > 1.0:
+            raise ValueError("THR must be larger than 1")
+        if not self.ths > 0:
+            raise ValueError("THS must be positive")
+
+    def key(self) -> str:
+        return repr(sorted(asdict(self).items()))
+
+
+@dataclass(eq=False)
+class MetaMotionGraph:
+    """Arrays of one meta motion graph. Node ``i`` is the beat at flat frame ``node_frame[i]``."""
+
+    style: str
+    fps: float
+    node_frame: np.ndarray      # (N,) int64
+    node_clip: np.ndarray       # (N,) int64
+    next_node: np.ndarray       # (N,) successor beat in the same clip, -1 at a clip's last beat
+    prev_node: np.ndarray       # (N,) predecessor beat, -1 at a clip's first beat
+    w1: np.ndarray              # (N,) intensity of the mono edge leaving the node (nan if none)
+    w1_z: np.ndarray            # (N,) standard score of w1 (0 if none)
+    bi_src: np.ndarray          # (E2,) directed bi-directional edges (both directions stored)
+    bi_dst: np.ndarray
+    bi_rd: np.ndarray           # (E2,) eq. (1) ratio
+    capacity: np.ndarray        # (N,) float, np.inf for "can go on forever"
+    init_nodes: np.ndarray      # first beat of every clip (InitS)
+    thr: float = 1.5            # THR the graph was built with
+    n_forced: int = 0           # bi-directional edges added by close_dead_ends
+    # One step = optional jump + mono edge, sorted by destination for the search.
+    step_src: np.ndarray = None
+    step_via: np.ndarray = None
+    step_dst: np.ndarray = None
+    step_w2: np.ndarray = None     # 1 for a plain mono step, w2 for a jump
+    step_jump: np.ndarray = None   # bool
+    step_rho: np.ndarray = None    # frames(prev(src)->src) / frames(via->dst); nan if src starts a clip
+    group_starts: np.ndarray = None  # start of each destination's run of steps
+    group_nodes: np.ndarray = None   # destination node of each run
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.node_frame)
+
+    @property
+    def n_bi_edges(self) -> int:
+        """Undirected bi-directional edges."""
+        return len(self.bi_src) // 2
+
+    @property
+    def mean_in_degree(self) -> float:
+        """D of the paper: mean number of steps entering a node."""
+        return len(self.step_dst) / max(self.n_nodes, 1)
+
+    def frames_to_next(self) -> np.ndarray:
+        nxt = self.next_node
+        out = np.zeros(self.n_nodes)
+        ok = nxt >= 0
+        out[ok] = self.node_frame[nxt[ok]] - self.node_frame[ok]
+        return out
+
+    def arrays(self) -> dict:
+        return {k: v for k, v in self.__dict__.items() if isinstance(v, np.ndarray)}
+
+
+def joint_weights(style: Style) -> np.ndarray:
+    """w(m) of eq. (3): the bone length a joint's rotation moves (its subtree), normalised.
+
+    A hip or spine rotation moves most of the body, a finger almost nothing; joints
+    that never move get weight 0 and are skipped.
+    """
+    sk = style.skeleton
+    length = np.linalg.norm(sk.offsets, axis=1)
+    subtree = length.copy()
+    for j in range(sk.n_joints - 1, 0, -1):
+        subtree[sk.parents[j]] += subtree[j]
+    subtree[0] = subtree.sum() - subtree[0]
+    moving = np.any(np.abs(style.local_rot - style.local_rot[:1]) > 1e-5, axis=(0, 2))
+    w = np.where(moving, subtree, 0.0)
+    return w / max(w.sum(), 1e-12)
+
+
+def rotation_glitches(style: Style, limit_deg_s: float) -> np.ndarray:
+    """(F-1,) True where some joint that moves a limb turns faster than ``limit_deg_s``
+    between frame f and f+1 (a capture glitch such as a wrist flip, not a movement)."""
+    sk = style.skeleton
+    reach = np.linalg.norm(sk.offsets, axis=1)
+    for j, end in sk.end_sites.items():
+        reach[j] += np.linalg.norm(end)
+    subtree = reach.copy()
+    for j in range(sk.n_joints - 1, 0, -1):
+        subtree[sk.parents[j]] += subtree[j]
+    joints = np.flatnonzero(subtree > 0.03)  # ignore finger tips and zero-length helpers
+    q = style.local_rot[:, joints].astype(np.float64)
+    speed = np.degrees(rot.angle(q[1:], q[:-1])).max(axis=1) * style.fps
+    return speed > limit_deg_s
+
+
+def _poses(style: Style, frames: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """Local joint rotations at ``frames``, the root's heading removed (jumps re-align it)."""
+    q = style.local_rot[frames][:, joints].astype(np.float64)
+    if joints[0] == 0:
+        root = q[:, 0]
+        q[:, 0] = rot.mul(rot.about_y(-rot.heading(root)), root)
+    return q
+
+
+def _distance(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Eq. (3) between paired poses: sum_m w_m * (geodesic angle)^2."""
+    dots = np.abs(np.sum(a * b, axis=-1))
+    return np.sum(w * (2.0 * np.arccos(np.minimum(dots, 1.0))) ** 2, axis=-1)
+
+
+class _SimilarityRows:
+    """Eq. (1) ratios ``rd`` for a block of rows at a time, so memory stays O(rows x N)."""
+
+    def __init__(self, style: Style, frames: np.ndarray, clip: np.ndarray, config: GraphConfig):
+        w = joint_weights(style)
+        joints = np.flatnonzero(w > 0)
+        if joints.size == 0:
+            joints, w = np.array([0]), np.ones(1)
+        self.w = w[joints]
+        lo = style.clip_starts[clip]
+        hi = style.clip_starts[clip + 1] - 1
+        before = _poses(style, np.clip(frames - 1, lo, hi), joints)
+        after = _poses(style, np.clip(frames + 1, lo, hi), joints)
+        self.local = _distance(before, after, self.w)
+        self.q = _poses(style, frames, joints)
+        self.clip = clip
+        self.min_gap = max(config.min_jump_beats, 1)
+
+    def __call__(self, rows: np.ndarray) -> np.ndarray:
+        dots = np.abs(np.einsum("ajk,bjk->abj", self.q[rows], self.q))
+        d = np.sum(self.w * (2.0 * np.arccos(np.minimum(dots, 1.0))) ** 2, axis=-1)
+        rd = d / np.maximum(self.local[rows, None] + self.local[None, :], 1e-12)
+        idx = np.arange(len(self.q))
+        near = (self.clip[rows, None] == self.clip[None, :]) & (np.abs(rows[:, None] - idx[None, :]) < self.min_gap)
+        rd[near] = np.inf
+        return rd
+
+
+def build_graph(style: Style, config: GraphConfig = GraphConfig()) -> MetaMotionGraph:
+    """Build the meta motion graph of one style (nodes, edges, weights, capacities)."""
+    frames = np.asarray(style.beat_frames, dtype=np.int64)
+    clip = style.clip_of_frame(frames)
+    n = len(frames)
+    same_next = np.r_[clip[1:] == clip[:-1], False]
+    if n > 1 and np.isfinite(config.max_joint_speed_deg_s):
+        glitch = np.r_[rotation_glitches(style, config.max_joint_speed_deg_s), False]
+        cum_glitch = np.concatenate([[0], np.cumsum(glitch)])
+        same_next[:-1] &= cum_glitch[frames[1:]] == cum_glitch[frames[:-1]]
+    next_node = np.where(same_next, np.arange(n) + 1, -1)
+    prev_node = np.full(n, -1)
+    prev_node[next_node[next_node >= 0]] = np.flatnonzero(next_node >= 0)
+
+    # Mono-directional edges: total kinetic energy between successive beats (J*s).
+    cum = np.concatenate([[0.0], np.cumsum(style.energy, dtype=np.float64)])
+    w1 = np.full(n, np.nan)
+    has = next_node >= 0
+    w1[has] = (cum[frames[next_node[has]]] - cum[frames[has]]) / style.fps
+    w1_z = np.zeros(n)
+    if has.sum() > 1 and np.std(w1[has]) > 0:
+        w1_z[has] = (w1[has] - w1[has].mean()) / w1[has].std()
+
+    # Bi-directional edges, eq. (1)-(3), a block of rows at a time.
+    rd_rows = _SimilarityRows(style, frames, clip, config)
+    src_l, dst_l, rd_l = [], [], []
+    for s in range(0, n, 256):
+        rows = np.arange(s, min(s + 256, n))
+        rd = rd_rows(rows)
+        r, c = np.nonzero(rd < config.ths)
+        src_l.append(rows[r])
+        dst_l.append(c)
+        rd_l.append(rd[r, c])
+    src, dst = np.concatenate(src_l), np.concatenate(dst_l)
+
+    graph = MetaMotionGraph(
+        style=style.name, fps=style.fps, node_frame=frames, node_clip=clip, next_node=next_node,
+        prev_node=prev_node, w1=w1, w1_z=w1_z, bi_src=src, bi_dst=dst, bi_rd=np.concatenate(rd_l).astype(np.float64),
+        capacity=np.zeros(n), init_nodes=np.flatnonzero(np.r_[True, clip[1:] != clip[:-1]]), thr=config.thr)
+    _finish(graph)
+
+    if config.close_dead_ends and not np.isinf(graph.capacity[graph.init_nodes]).any():
+        # No start can go on forever (a tiny database without cycles): link every dead end
+        # to its most similar beat that has a successor, so long songs still find a path.
+        ends = np.flatnonzero(next_node < 0)
+        if has.any() and len(ends):
+            rd = rd_rows(ends)[:, has]
+            best = np.flatnonzero(has)[np.argmin(rd, axis=1)]
+            ok = np.isfinite(rd.min(axis=1))
+            ends, best, best_rd = ends[ok], best[ok], rd.min(axis=1)[ok]
+            graph.bi_src = np.r_[graph.bi_src, ends, best]
+            graph.bi_dst = np.r_[graph.bi_dst, best, ends]
+            graph.bi_rd = np.r_[graph.bi_rd, best_rd, best_rd]
+            graph.n_forced = len(ends)
+            _finish(graph)
+    return graph
+
+
+def _finish(g: MetaMotionGraph) -> None:
+    """Derive the step list (sorted by destination) and the capacities."""
+    n = g.n_nodes
+    mono = np.flatnonzero(g.next_node >= 0)
+    usable = g.next_node[g.bi_dst] >= 0  # a jump must be followed by a mono edge
+    jsrc, jvia = g.bi_src[usable], g.bi_dst[usable]
+    src = np.r_[mono, jsrc]
+    via = np.r_[mono, jvia]
+    dst = g.next_node[via]
+    w2 = np.r_[np.ones(len(mono)), np.maximum(g.bi_rd[usable], g.thr)]
+    jump = np.r_[np.zeros(len(mono), bool), np.ones(len(jsrc), bool)]
+    f_next = g.frames_to_next()
+    prev = g.prev_node[src]
+    rho = np.full(len(src), np.nan)
+    okp = prev >= 0
+    rho[okp] = f_next[prev[okp]] / f_next[via[okp]]
+    order = np.argsort(dst, kind="stable")
+    g.step_src, g.step_via, g.step_dst = src[order], via[order], dst[order]
+    g.step_w2, g.step_jump, g.step_rho = w2[order], jump[order], rho[order]
+    starts = np.flatnonzero(np.r_[True, g.step_dst[1:] != g.step_dst[:-1]]) if len(dst) else np.zeros(0, int)
+    g.group_starts = starts
+    g.group_nodes = g.step_dst[starts] if len(dst) else np.zeros(0, int)
+    g.capacity = synchronization_capacity(n, g.step_src, g.step_dst)
+
+
+def synchronization_capacity(n_nodes: int, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """Capacity of every node of a step graph (edges ``src -> dst``), in beats.
+
+    Properties (1)-(4) of §3.2: an end node has 0; a node that can reach a cycle has
+    infinity; otherwise a node has 1 + the largest capacity among its successors.
+    """
+    src = np.asarray(src, dtype=np.int64)
+    dst = np.asarray(dst, dtype=np.int64)
+    cap = np.zeros(n_nodes)
+    if n_nodes == 0:
+        return cap
+    adj = coo_matrix((np.ones(len(src)), (src, dst)), shape=(n_nodes, n_nodes)).tocsr()
+    n_comp, label = connected_components(adj, directed=True, connection="strong")
+    size = np.bincount(label, minlength=n_comp)
+    cyclic = size[label] > 1
+    cyclic[src[src == dst]] = True
+    # Everything that can reach a cyclic node can go on forever.
+    forever = np.zeros(n_nodes, bool)
+    if cyclic.any():
+        radj = adj.T.tocsr()
+        super_src = n_nodes  # a virtual node pointing to every cyclic node
+        seeds = np.flatnonzero(cyclic)
+        aug = coo_matrix((np.ones(len(seeds) + radj.nnz),
+                          (np.r_[np.full(len(seeds), super_src), radj.tocoo().row],
+                           np.r_[seeds, radj.tocoo().col])), shape=(n_nodes + 1, n_nodes + 1)).tocsr()
+        reached = breadth_first_order(aug, super_src, directed=True, return_predecessors=False)
+        forever[reached[reached < n_nodes]] = True
+    cap[forever] = np.inf
+    # The rest is a DAG: relax longest-path-to-a-sink until nothing changes.
+    finite_edges = ~forever[src]
+    fs, fd = src[finite_edges], dst[finite_edges]
+    for _ in range(n_nodes + 1):
+        new = cap.copy()
+        np.maximum.at(new, fs, cap[fd] + 1)
+        if np.array_equal(new, cap):
+            break
+        cap = new
+    return cap

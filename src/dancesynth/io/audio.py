@@ -1,0 +1,377 @@
+"""Decoding audio files into float32 samples, with errors a user can act on.
+
+``load_audio`` reads what libsndfile reads (wav, flac, ogg/vorbis, ogg/opus, mp3,
+aiff, ...) through ``soundfile`` and falls back to the ``ffmpeg`` program for
+everything else (m4a/aac, opus in webm, mp4/mkv audio tracks, wma...). Samples are
+down-mixed to mono by averaging channels and resampled with soxr, so the same
+content gives the same samples whatever container it came in.
+
+Checks happen before the expensive part: the duration comes from the file header
+(``soundfile.info`` or ``ffprobe``) so that an hour-long file is refused at once,
+and truncation is detected both from the container (an Ogg stream that lacks its
+end-of-stream page, a WAV whose data chunk is shorter than its header says) and by
+comparing the decoded length with the length the header declares. A user gets a
+"truncated or corrupt" error rather than a silently shortened song.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import struct
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import soundfile as sf
+
+from ..errors import InputError
+
+DEFAULT_SR = 22050
+DEFAULT_MAX_DURATION_S = 900.0
+DEFAULT_MIN_DURATION_S = 4.0
+
+# Formats a user can always convert to; named in every "cannot decode" message.
+_CONVERT_HINT = "convert it to wav, flac, ogg or mp3 (e.g. `ffmpeg -i IN out.wav`)"
+# A decoded stream may fall this much short of its header's length without being
+# called truncated: encoders disagree by a frame or two of priming/padding samples.
+_SHORTFALL_TOLERANCE_S = 0.25
+_SHORTFALL_TOLERANCE_FRACTION = 0.005
+# Decode in blocks so a long stereo file is down-mixed as it is read.
+_BLOCK_FRAMES = 1 << 18
+# ffmpeg/ffprobe must never hang the caller; a 15-minute song decodes in seconds.
+_FFPROBE_TIMEOUT_S = 30.0
+_FFMPEG_TIMEOUT_S = 300.0
+
+
+@dataclass(frozen=True)
+class AudioInfo:
+    """What a file's header says, read without decoding the audio.
+
+    ``frames`` is 0 where the header does not say how long the stream is
+    (then ``duration_s`` is ``nan`` and the length is checked while decoding).
+    ``backend`` is ``"soundfile"`` or ``"ffmpeg"``: which decoder will read it.
+    """
+
+    path: Path
+    samplerate: int
+    channels: int
+    frames: int
+    duration_s: float
+    format: str
+    backend: str
+
+
+def audio_duration_s(path) -> float:
+    """Duration of an audio file in seconds from its header, without decoding it.
+
+    Raises ``InputError`` for a missing, empty, unreadable or truncated file, or one
+    whose header does not state its length.
+    """
+    info = probe_audio(path)
+    if not np.isfinite(info.duration_s):
+        raise InputError(f"{info.path}: the file does not state its duration; {_CONVERT_HINT}")
+    return info.duration_s
+
+
+def probe_audio(path) -> AudioInfo:
+    """Read the header of an audio file (and check its container is complete)."""
+    path = _check_path(path)
+    try:
+        info = sf.info(str(path))
+    except (sf.LibsndfileError, RuntimeError, ValueError):
+        # libsndfile does not know the format (its message then misleadingly says
+        # "file does not exist"); ffmpeg knows far more containers and codecs.
+        info = None
+    if info is not None and info.samplerate > 0 and info.channels > 0:
+        result = AudioInfo(path, int(info.samplerate), int(info.channels), int(info.frames),
+                           float(info.frames) / info.samplerate, str(info.format), "soundfile")
+    else:
+        result = _ffprobe(path)
+    _check_container_complete(result)
+    return result
+
+
+def load_audio(path, *, sr: int | None = DEFAULT_SR, mono: bool = True,
+               max_duration_s: float | None = DEFAULT_MAX_DURATION_S,
+               min_duration_s: float = DEFAULT_MIN_DURATION_S) -> tuple[np.ndarray, int]:
+    """Decode an audio file to float32 samples.
+
+    Parameters
+    ----------
+    path : str or Path
+        wav/flac/ogg/mp3 (read by libsndfile) or anything ffmpeg decodes.
+    sr : int or None
+        Output sample rate; ``None`` keeps the file's own rate.
+    mono : bool
+        Average the channels into one (shape ``(n,)``); otherwise the result has
+        shape ``(channels, n)`` as in librosa.
+    max_duration_s, min_duration_s : float
+        Refuse files longer / shorter than this (``max_duration_s=None``: no limit).
+
+    Returns
+    -------
+    (y, sr) : the samples and their sample rate.
+
+    Raises ``InputError`` (one line, naming the file) when the file is missing, a
+    folder, empty, not audio, truncated or corrupt, too long or too short.
+    """
+    if sr is not None and (int(sr) != sr or sr <= 0):
+        raise InputError(f"sample rate must be a positive integer, got {sr!r}")
+    info = probe_audio(path)
+    _check_duration(info.path, info.duration_s, max_duration_s, min_duration_s)
+    if info.backend == "soundfile":
+        y = _decode_soundfile(info, mono)
+    else:
+        y = _decode_ffmpeg(info, mono, max_duration_s)
+    n = y.shape[-1]
+    _check_not_truncated(info, n)
+    # Again on what was decoded: a header may not state the length, or understate it.
+    _check_duration(info.path, n / info.samplerate, max_duration_s, min_duration_s)
+    if not np.all(np.isfinite(y)):
+        raise InputError(f"{info.path}: the audio contains NaN or infinite samples, so the file is corrupt; "
+                         f"re-export or {_CONVERT_HINT}")
+    out_sr = info.samplerate if sr is None else int(sr)
+    if out_sr != info.samplerate:
+        y = resample(y, info.samplerate, out_sr)
+    return np.ascontiguousarray(y, dtype=np.float32), out_sr
+
+
+def resample(y: np.ndarray, sr_in: int, sr_out: int) -> np.ndarray:
+    """Resample ``(n,)`` or ``(channels, n)`` samples with soxr (high quality)."""
+    import soxr
+
+    if sr_in == sr_out:
+        return y
+    if y.ndim == 1:
+        return soxr.resample(y, sr_in, sr_out, quality="HQ").astype(np.float32, copy=False)
+    # soxr wants (frames, channels).
+    return soxr.resample(y.T, sr_in, sr_out, quality="HQ").T.astype(np.float32, copy=False)
+
+
+# --------------------------------------------------------------------------- checks
+
+def _check_path(path) -> Path:
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: file not found; check the path and the spelling")
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder, not an audio file; give the path of a song file inside it")
+    if not path.is_file():
+        # A pipe or a device would block the reads below, or never end.
+        raise InputError(f"{path}: is not a regular file; save the audio to a file first")
+    try:
+        size = path.stat().st_size
+        with open(path, "rb"):
+            pass
+    except OSError as exc:
+        raise InputError(f"{path}: cannot be read ({exc.strerror}); check its permissions") from None
+    if size == 0:
+        raise InputError(f"{path}: the file is empty (0 bytes); the download or copy probably failed, fetch it again")
+    return path
+
+
+def _check_duration(path: Path, duration_s: float, max_duration_s, min_duration_s) -> None:
+    if not np.isfinite(duration_s):
+        return
+    if duration_s <= 0:
+        raise InputError(f"{path}: the file contains no audio samples; {_CONVERT_HINT}")
+    if max_duration_s is not None and duration_s > max_duration_s:
+        raise InputError(
+            f"{path}: the audio is {duration_s / 60:.1f} min long, over the limit of "
+            f"{max_duration_s / 60:.1f} min; raise the limit (--max-minutes, or max_duration_s=) or cut the song")
+    if duration_s < min_duration_s:
+        raise InputError(
+            f"{path}: the audio is only {duration_s:.1f} s long, too short to find a beat; "
+            f"it needs at least {min_duration_s:g} s")
+
+
+def _truncated(path: Path, detail: str) -> InputError:
+    return InputError(f"{path}: the file is truncated or corrupt ({detail}); download or export it again")
+
+
+def _check_not_truncated(info: AudioInfo, decoded_frames: int) -> None:
+    """Compare the decoded length with the length the header declared."""
+    if info.frames <= 0:
+        return
+    tolerance = max(_SHORTFALL_TOLERANCE_S * info.samplerate, _SHORTFALL_TOLERANCE_FRACTION * info.frames)
+    if decoded_frames < info.frames - tolerance:
+        raise _truncated(info.path, f"its header declares {info.duration_s:.1f} s but only "
+                                    f"{decoded_frames / info.samplerate:.1f} s could be decoded")
+
+
+def _check_container_complete(info: AudioInfo) -> None:
+    """Container-level truncation checks that need no decoding.
+
+    libsndfile (and ffprobe) report the length of what is *there* for Ogg and WAV,
+    so a file cut short looks like a short song. The containers themselves tell:
+    an Ogg stream ends with a page flagged end-of-stream, and a RIFF/WAV header
+    states the size of its data chunk.
+    """
+    with open(info.path, "rb") as fh:
+        head = fh.read(4096)
+    if head.startswith(b"OggS"):
+        problem = _ogg_tail_problem(info.path)
+        if problem:
+            raise _truncated(info.path, problem)
+    elif head.startswith(b"RIFF") and head[8:12] == b"WAVE":
+        problem = _wav_data_problem(info.path)
+        if problem:
+            raise _truncated(info.path, problem)
+
+
+def _ogg_tail_problem(path: Path) -> str | None:
+    """None if the last Ogg page is complete and flagged end-of-stream, else why not."""
+    size = path.stat().st_size
+    # An Ogg page is at most 27 + 255 + 255 * 255 bytes long.
+    tail_len = min(size, 27 + 255 + 255 * 255 + 4096)
+    with open(path, "rb") as fh:
+        fh.seek(size - tail_len)
+        tail = fh.read()
+    pos = tail.rfind(b"OggS")
+    while pos >= 0:
+        # Walk back from the last capture pattern to the last page that ends exactly
+        # at the end of the file (a later "OggS" may be payload or a cut-off page).
+        if pos + 27 <= len(tail):
+            n_segments = tail[pos + 26]
+            if pos + 27 + n_segments <= len(tail):
+                body = sum(tail[pos + 27:pos + 27 + n_segments])
+                if pos + 27 + n_segments + body == len(tail):
+                    if tail[pos + 5] & 0x04:
+                        return None
+                    return "the Ogg stream stops without its end-of-stream page"
+        pos = tail.rfind(b"OggS", 0, pos)
+    return "the last Ogg page is cut off"
+
+
+def _wav_data_problem(path: Path) -> str | None:
+    """None if the WAV data chunk holds as many bytes as its header declares."""
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        fh.seek(12)
+        byte_rate = 0
+        while True:
+            chunk = fh.read(8)
+            if len(chunk) < 8:
+                return None  # no data chunk found: libsndfile has already judged it
+            cid, csize = chunk[:4], struct.unpack("<I", chunk[4:])[0]
+            if cid == b"fmt ":
+                fmt = fh.read(min(csize, 16))
+                if len(fmt) >= 12:
+                    byte_rate = struct.unpack("<I", fmt[8:12])[0]
+                fh.seek(csize - len(fmt) + (csize & 1), 1)
+                continue
+            if cid == b"data":
+                available = size - fh.tell()
+                # Writers that stream (or exceed 4 GiB) leave 0 or 0xFFFFFFFF here.
+                if csize in (0, 0xFFFFFFFF) or csize <= available:
+                    return None
+                if byte_rate:
+                    return (f"its header declares {csize / byte_rate:.1f} s of samples but the file "
+                            f"holds {available / byte_rate:.1f} s")
+                return f"its header declares {csize} bytes of samples but the file holds {available}"
+            fh.seek(csize + (csize & 1), 1)
+
+
+# ------------------------------------------------------------------------ decoders
+
+def _decode_soundfile(info: AudioInfo, mono: bool) -> np.ndarray:
+    blocks = []
+    try:
+        with sf.SoundFile(str(info.path)) as fh:
+            while True:
+                block = fh.read(_BLOCK_FRAMES, dtype="float32", always_2d=True)
+                if len(block) == 0:
+                    break
+                # Down-mix block by block: a stereo file never sits in memory twice.
+                blocks.append(block.mean(axis=1) if mono else block.T.copy())
+    except (sf.LibsndfileError, RuntimeError) as exc:
+        raise _truncated(info.path, f"the decoder stopped: {_one_line(str(exc))}") from None
+    if not blocks:
+        return np.zeros(0 if mono else (info.channels, 0), dtype=np.float32)
+    return np.concatenate(blocks, axis=-1)
+
+
+def _tool(name: str, path: Path) -> str:
+    exe = shutil.which(name)
+    if exe is None:
+        raise InputError(f"{path}: libsndfile cannot read this format and `{name}` is not installed; "
+                         f"install ffmpeg or {_CONVERT_HINT}")
+    return exe
+
+
+def _ffmpeg_input(path: Path) -> str:
+    # "file:" stops ffmpeg from reading a protocol ("concat:", "http:") or an
+    # option out of a file name.
+    return "file:" + str(path.resolve())
+
+
+def _ffprobe(path: Path) -> AudioInfo:
+    cmd = [_tool("ffprobe", path), "-v", "error", "-select_streams", "a:0",
+           "-show_entries", "stream=codec_name,sample_rate,channels,duration:format=format_name,duration",
+           "-of", "json", _ffmpeg_input(path)]
+    try:
+        proc = subprocess.run(cmd, capture_output=True, timeout=_FFPROBE_TIMEOUT_S, check=False)
+    except subprocess.TimeoutExpired:
+        raise InputError(f"{path}: reading the file's header took too long; {_CONVERT_HINT}") from None
+    try:
+        meta = json.loads(proc.stdout.decode("utf-8", "replace") or "{}")
+    except json.JSONDecodeError:
+        meta = {}
+    streams = meta.get("streams") or []
+    stream = streams[0] if streams else {}
+    samplerate = int(float(stream.get("sample_rate") or 0))
+    channels = int(stream.get("channels") or 0)
+    if proc.returncode != 0 or samplerate <= 0 or channels <= 0:
+        if proc.returncode:
+            why = "ffmpeg: " + _one_line(proc.stderr.decode("utf-8", "replace")).replace(_ffmpeg_input(path) + ": ", "")
+        else:
+            why = "no audio stream found"
+        raise InputError(f"{path}: cannot decode it: not an audio file, or truncated or corrupt ({why}); "
+                         f"check that it plays, then {_CONVERT_HINT}")
+    duration = _float_or_nan(stream.get("duration"))
+    if not np.isfinite(duration):
+        duration = _float_or_nan((meta.get("format") or {}).get("duration"))
+    frames = int(round(duration * samplerate)) if np.isfinite(duration) else 0
+    fmt = f"{(meta.get('format') or {}).get('format_name', '?')}/{stream.get('codec_name', '?')}"
+    return AudioInfo(path, samplerate, channels, frames, duration, fmt, "ffmpeg")
+
+
+def _decode_ffmpeg(info: AudioInfo, mono: bool, max_duration_s) -> np.ndarray:
+    cmd = [_tool("ffmpeg", info.path), "-nostdin", "-hide_banner", "-loglevel", "error",
+           "-i", _ffmpeg_input(info.path), "-map", "0:a:0", "-vn", "-sn", "-dn"]
+    if max_duration_s is not None:
+        # Bounds the work even when the header did not state the duration.
+        cmd += ["-t", f"{max_duration_s + 1.0:.3f}"]
+    channels = 1 if mono else info.channels
+    if mono and info.channels > 1:
+        # ffmpeg's own "-ac 1" weights channels unequally; a plain mean matches the
+        # soundfile path exactly.
+        gain = 1.0 / info.channels
+        cmd += ["-af", "pan=mono|c0=" + "+".join(f"{gain!r}*c{i}" for i in range(info.channels))]
+    else:
+        cmd += ["-ac", str(channels)]
+    cmd += ["-ar", str(info.samplerate), "-f", "f32le", "-acodec", "pcm_f32le", "pipe:1"]
+    try:
+        proc = subprocess.run(cmd, capture_output=True, timeout=_FFMPEG_TIMEOUT_S, check=False)
+    except subprocess.TimeoutExpired:
+        raise InputError(f"{info.path}: decoding took longer than {_FFMPEG_TIMEOUT_S:.0f} s; {_CONVERT_HINT}") from None
+    if proc.returncode != 0:
+        why = _one_line(proc.stderr.decode("utf-8", "replace")).replace(_ffmpeg_input(info.path) + ": ", "")
+        raise _truncated(info.path, f"ffmpeg failed: {why}")
+    data = np.frombuffer(proc.stdout, dtype="<f4")
+    data = data[: len(data) - len(data) % channels]
+    return data.reshape(-1, channels).T.copy() if channels > 1 else data.copy()
+
+
+def _float_or_nan(value) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+def _one_line(text: str) -> str:
+    lines = [ln.strip() for ln in text.strip().splitlines() if ln.strip()]
+    return lines[-1] if lines else "no details"

@@ -1,0 +1,1 @@
+"""Motion analysis: joint roles, motion beats, kinetic energy, foot contacts, the motion database."""

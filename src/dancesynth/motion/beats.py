@@ -1,0 +1,99 @@
+"""Motion beats: the frames where a dance movement turns.
+
+Two detectors:
+
+- ``pca_beats`` -- the short-term PCA method of Xu, Takagi & Yoneyama (2010), used by
+  the meta-motion-graph paper: over short overlapping windows the body pose is
+  projected on its first principal component (the dominant movement in that
+  window); where that projection turns (its velocity changes sign) the movement
+  changes direction. The turning strengths of all windows are overlap-added into a
+  "motion onset" curve, and a regular beat sequence is induced from it with the
+  same dynamic-programming beat tracker we use for music (librosa's).
+- ``kinematic_beats`` -- local minima of the summed joint speed after
+  Savitzky-Golay smoothing (Aristidou et al. §5.2.1; Kim et al. 2003). Irregular but
+  simple; the evaluation metrics use these.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage, signal
+
+from .. import rotations as rot
+
+
+def pose_features(global_pos: np.ndarray, global_root_rot: np.ndarray) -> np.ndarray:
+    """Joint positions relative to the root, in the root's heading frame: (F, 3J).
+
+    Removing the root's travel and heading keeps what the body does, not where it goes.
+    """
+    yaw = rot.heading(global_root_rot)
+    rel = global_pos - global_pos[:, :1]
+    rel = rot.apply(rot.about_y(-yaw)[:, None, :], rel)
+    return rel.reshape(len(global_pos), -1)
+
+
+def pca_turn_envelope(features: np.ndarray, fps: float, *, window_s: float = 1.0,
+                      hop_s: float = 0.1) -> np.ndarray:
+    """Overlap-added turning strength of the first principal component, per frame."""
+    n = len(features)
+    win = max(4, int(round(window_s * fps)))
+    hop = max(1, int(round(hop_s * fps)))
+    env = np.zeros(n)
+    weight = np.zeros(n)
+    if n < win:
+        win = n
+    taper = np.hanning(win + 2)[1:-1]
+    reach = max(1, win // 8)
+    for start in range(0, n - win + 1, hop):
+        x = features[start:start + win]
+        x = x - x.mean(axis=0)
+        # First right-singular vector = first principal axis of this window.
+        _, _, vt = np.linalg.svd(x, full_matrices=False)
+        v = np.gradient(x @ vt[0]) * fps
+        turns = np.flatnonzero(np.sign(v[1:]) * np.sign(v[:-1]) < 0)
+        if turns.size:
+            speed = np.abs(v)
+            before = ndimage.maximum_filter1d(speed, reach + 1, origin=reach // 2)
+            after = ndimage.maximum_filter1d(speed, reach + 1, origin=-((reach + 1) // 2))
+            # A turn is strong when the movement was fast before it and fast after it.
+            strength = before[turns] + after[np.minimum(turns + 1, win - 1)]
+            np.add.at(env, start + turns, strength * taper[turns])
+        weight[start:start + win] += taper
+    env /= np.maximum(weight, 1e-9)
+    return np.convolve(env, np.hanning(5) / np.hanning(5).sum(), mode="same")
+
+
+def induce_beats(envelope: np.ndarray, fps: float, *, start_bpm: float = 110.0) -> np.ndarray:
+    """A regular beat sequence (frame indices) from a motion onset envelope."""
+    import librosa  # heavy; only the database builder needs it
+
+    if envelope.size < 4 or not np.any(envelope > 0):
+        return np.zeros(0, dtype=np.int64)
+    _, frames = librosa.beat.beat_track(onset_envelope=envelope, sr=fps, hop_length=1,
+                                        start_bpm=start_bpm, trim=False)
+    return np.unique(np.asarray(frames, dtype=np.int64))
+
+
+def pca_beats(global_pos: np.ndarray, global_root_rot: np.ndarray, fps: float, **kwargs) -> np.ndarray:
+    """Motion beat frames by short-term PCA (see module docstring)."""
+    env = pca_turn_envelope(pose_features(global_pos, global_root_rot), fps)
+    return induce_beats(env, fps, **kwargs)
+
+
+def summed_speed(global_pos: np.ndarray, fps: float) -> np.ndarray:
+    """Sum over joints of the joint speed (m/s), per frame."""
+    if len(global_pos) < 2:
+        return np.zeros(len(global_pos))
+    return np.linalg.norm(np.gradient(global_pos, axis=0), axis=-1).sum(axis=1) * fps
+
+
+def kinematic_beats(speed: np.ndarray, fps: float, *, smooth_s: float = 0.15, polyorder: int = 2,
+                    min_separation_s: float = 0.1) -> np.ndarray:
+    """Frames of local minima of the Savitzky-Golay-smoothed speed curve."""
+    win = max(polyorder + 2, int(round(smooth_s * fps)) | 1)
+    if speed.size <= win:
+        return np.zeros(0, dtype=np.int64)
+    smooth = signal.savgol_filter(speed, win, polyorder)
+    order = max(1, int(round(min_separation_s * fps / 2)))
+    return signal.argrelmin(smooth, order=order)[0].astype(np.int64)

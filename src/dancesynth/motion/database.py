@@ -1,0 +1,392 @@
+"""The motion database: mocap clips grouped into styles, analysed once, stored compactly.
+
+A *style* is what Xu et al. §3.2 call a sub-group: clips of one dance genre (from the
+database's annotation) whose motion tempo falls in one fixed-width tempo range, on
+one skeleton. Each style keeps its clips as flat arrays plus clip ranges (Holden's
+motion-matching layout), with the motion beats, per-frame kinetic energy and foot
+contacts computed at build time.
+
+On disk a database is a folder: ``database.json`` (styles, skeletons, clip names and
+sources) and one compressed ``<style>.npz`` per style. Rotations of animated joints
+are stored as int16 quaternions (error < 0.01 degrees); joints that never move are
+stored once.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import hashlib
+import json
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterable
+
+import numpy as np
+
+from ..errors import InputError, ModelError
+from ..io.files import atomic_output
+from ..kinematics import fk
+from ..timebase import bpm_from_intervals
+from ..types import MotionClip, Skeleton
+from . import beats as motion_beats
+from .features import foot_contacts, foot_points, kinetic_energy
+from .resample import resample_clip_arrays
+from .roles import bone_masses, find_roles
+
+FORMAT_VERSION = 1
+BUNDLED_DATABASE = Path(__file__).resolve().parents[1] / "data" / "database"
+MANIFEST_NAME = "genres.toml"
+
+
+@dataclass(frozen=True)
+class AnalysisConfig:
+    """How clips are analysed and grouped when a database is built."""
+
+    beat_method: str = "pca"        # "pca" (Xu's short-term PCA) or "kinematic" (speed minima)
+    max_fps: float = 60.0           # faster captures are decimated to this rate
+    tempo_bin_bpm: float = 40.0     # width of the tempo ranges that split a genre (§3.2)
+    min_style_minutes: float = 1.0  # a tempo range with less motion joins its nearest neighbour
+    min_beats_per_clip: int = 3     # clips with fewer motion beats carry no usable edge
+
+
+@dataclass(eq=False)
+class Style:
+    """One sub-group of the database: clips of one genre, tempo range and skeleton."""
+
+    name: str
+    genre: str
+    skeleton: Skeleton
+    fps: float
+    clip_names: tuple[str, ...]
+    clip_sources: tuple[str, ...]
+    clip_starts: np.ndarray      # (C+1,) frame offsets of each clip in the flat arrays
+    local_rot: np.ndarray        # (F, J, 4) float32
+    root_pos: np.ndarray         # (F, 3) float32, metres
+    contacts: np.ndarray         # (F, 2) bool, (left, right) foot planted
+    energy: np.ndarray           # (F,) float32 kinetic energy, joules
+    beat_frames: np.ndarray      # (B,) int64 flat frame index of every motion beat
+    clip_tempo_bpm: np.ndarray   # (C,)
+    fingerprint: str = ""
+
+    @property
+    def n_clips(self) -> int:
+        return len(self.clip_names)
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.local_rot)
+
+    @property
+    def duration_s(self) -> float:
+        return self.n_frames / self.fps
+
+    @property
+    def tempo_range_bpm(self) -> tuple[float, float]:
+        return float(self.clip_tempo_bpm.min()), float(self.clip_tempo_bpm.max())
+
+    @property
+    def natural_tempo_bpm(self) -> float:
+        return float(np.median(self.clip_tempo_bpm))
+
+    def clip_of_frame(self, frames) -> np.ndarray:
+        return np.searchsorted(self.clip_starts, frames, side="right") - 1
+
+    def clip(self, index: int) -> MotionClip:
+        """Clip ``index`` as a ``MotionClip`` (float64), with its beats in ``meta``."""
+        a, b = int(self.clip_starts[index]), int(self.clip_starts[index + 1])
+        beats = self.beat_frames[(self.beat_frames >= a) & (self.beat_frames < b)] - a
+        return MotionClip(self.skeleton, self.fps, self.root_pos[a:b], self.local_rot[a:b],
+                          contacts=self.contacts[a:b],
+                          meta={"name": self.clip_names[index], "source": self.clip_sources[index],
+                                "style": self.name, "beat_frames": beats})
+
+
+@dataclass(eq=False)
+class MotionDatabase:
+    styles: dict[str, Style]
+    source: str = ""
+    notes: dict = field(default_factory=dict)
+
+    def genres(self) -> list[str]:
+        return sorted({s.genre for s in self.styles.values()})
+
+    def styles_of(self, name: str) -> list[Style]:
+        """Styles called ``name``, or all styles of genre ``name``; a clear error otherwise."""
+        if name in self.styles:
+            return [self.styles[name]]
+        found = [s for s in self.styles.values() if s.genre == name]
+        if not found:
+            raise InputError(f"unknown style '{name}': this database has {', '.join(sorted(self.styles))} "
+                             f"(run 'dancesynth styles' to list them)")
+        return found
+
+
+# ---------------------------------------------------------------------------------------------
+# Analysis of one clip
+
+
+@dataclass
+class ClipAnalysis:
+    beat_frames: np.ndarray
+    energy: np.ndarray
+    contacts: np.ndarray
+    tempo_bpm: float
+
+
+def analyse_clip(clip: MotionClip, config: AnalysisConfig = AnalysisConfig()) -> ClipAnalysis:
+    """Motion beats, kinetic energy per frame and foot contacts of one clip."""
+    sk = clip.skeleton
+    g_rot, g_pos = fk(clip.local_rot, clip.root_pos, sk.offsets, sk.parents, clip.local_pos)
+    if config.beat_method == "pca":
+        beats = motion_beats.pca_beats(g_pos, g_rot[:, 0], clip.fps)
+    elif config.beat_method == "kinematic":
+        beats = motion_beats.kinematic_beats(motion_beats.summed_speed(g_pos, clip.fps), clip.fps)
+    else:
+        raise InputError(f"unknown beat method '{config.beat_method}' (use 'pca' or 'kinematic')")
+    energy = kinetic_energy(g_pos, clip.fps, bone_masses(sk))
+    contacts = foot_contacts(foot_points(clip, find_roles(sk), g_rot, g_pos), clip.fps)
+    return ClipAnalysis(beats, energy, contacts, bpm_from_intervals(np.diff(beats) / clip.fps))
+
+
+# ---------------------------------------------------------------------------------------------
+# Building
+
+
+def collect_sources(folder: Path, manifest: Path | None = None) -> list[tuple[str, Path]]:
+    """(genre, bvh path) pairs of a folder: from a genres manifest or its sub-folder names.
+
+    The manifest (``genres.toml`` in the folder unless given) maps each genre to glob
+    patterns relative to the folder::
+
+        [genres]
+        salsa = ["cmu_daz_salsa/*.bvh"]
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(f"database folder {folder} does not exist")
+    manifest = Path(manifest) if manifest else folder / MANIFEST_NAME
+    files = sorted(p for p in folder.rglob("*") if p.suffix.lower() == ".bvh" and p.is_file())
+    if manifest.is_file() or manifest != folder / MANIFEST_NAME:
+        try:
+            genres = tomllib.loads(manifest.read_text())["genres"]
+        except (OSError, tomllib.TOMLDecodeError, KeyError, UnicodeDecodeError) as exc:
+            raise InputError(f"{manifest}: not a valid genres manifest ({exc}); "
+                             "it needs a [genres] table of genre = [glob patterns]") from None
+        out = []
+        for genre, patterns in genres.items():
+            for pat in [patterns] if isinstance(patterns, str) else patterns:
+                out += [(genre, p) for p in files if fnmatch.fnmatch(p.relative_to(folder).as_posix(), pat)]
+    else:
+        out = [(p.parent.name if p.parent != folder else folder.name, p) for p in files]
+    if not out:
+        raise InputError(f"no .bvh files found in {folder}: a database folder needs BVH motion files "
+                         f"(one sub-folder per genre, or a {MANIFEST_NAME})")
+    return out
+
+
+def _leg_length(skeleton: Skeleton) -> float:
+    roles = find_roles(skeleton)
+    return float(sum(np.linalg.norm(skeleton.offsets[j]) for j in (roles.knees[0], roles.ankles[0])))
+
+
+def build_database(sources: Iterable[tuple[str, Path]], config: AnalysisConfig = AnalysisConfig(),
+                   *, progress: Callable[[str], None] | None = None) -> MotionDatabase:
+    """Read, analyse and group BVH clips into styles."""
+    from ..io.bvh import read_bvh  # the BVH reader is only needed when building
+
+    groups: dict[tuple, list] = {}
+    for genre, path in sources:
+        if progress:
+            progress(str(path))
+        clip = read_bvh(path)
+        fps = clip.fps / max(1, round(clip.fps / config.max_fps)) if clip.fps > config.max_fps * 1.01 else clip.fps
+        key = (genre, clip.skeleton.names, tuple(clip.skeleton.parents))
+        groups.setdefault(key, []).append((Path(path), clip, fps))
+    if not groups:
+        raise InputError("no motion clips to build a database from")
+    topologies_per_genre: dict[str, int] = {}
+    for genre, *_ in groups:
+        topologies_per_genre[genre] = topologies_per_genre.get(genre, 0) + 1
+
+    styles: dict[str, Style] = {}
+    for (genre, names, _), members in groups.items():
+        canon = members[0][1].skeleton
+        fps = min(m[2] for m in members)
+        analysed = []
+        for path, clip, _ in members:
+            rot_, pos_, _ = resample_clip_arrays(clip.local_rot, clip.root_pos, None, clip.fps, fps)
+            pos_ = pos_ * (_leg_length(canon) / _leg_length(clip.skeleton))
+            c = MotionClip(canon, fps, pos_, rot_, meta={"name": path.stem, "source": str(path)})
+            a = analyse_clip(c, config)
+            if len(a.beat_frames) >= config.min_beats_per_clip:
+                analysed.append((c, a))
+        if not analysed:
+            continue
+        base = genre if topologies_per_genre[genre] == 1 else f"{genre}-{len(names)}j"
+        for name, part in _split_by_tempo(base, analysed, config.tempo_bin_bpm, config.min_style_minutes).items():
+            styles[name] = _style_from(name, genre, canon, fps, part)
+    if not styles:
+        raise InputError(f"no clip had at least {config.min_beats_per_clip} motion beats: the database "
+                         "needs dance clips several seconds long")
+    return MotionDatabase(styles)
+
+
+def _split_by_tempo(base: str, analysed: list, width: float, min_minutes: float) -> dict[str, list]:
+    """Split a genre into tempo ranges of fixed width (§3.2), merging ranges too small to dance on."""
+    tempi = np.array([a.tempo_bpm for _, a in analysed])
+    minutes = np.array([c.n_frames / c.fps / 60.0 for c, _ in analysed])
+    bins = np.floor(tempi / width).astype(int)
+    while len(set(bins)) > 1:
+        labels = sorted(set(bins))
+        size = {b: minutes[bins == b].sum() for b in labels}
+        small = min(labels, key=lambda b: size[b])
+        if size[small] >= min_minutes:
+            break
+        centre = {b: np.median(tempi[bins == b]) for b in labels}
+        target = min((b for b in labels if b != small), key=lambda b: abs(np.log(centre[b] / centre[small])))
+        bins[bins == small] = target
+    groups = {b: [x for x, bb in zip(analysed, bins) if bb == b] for b in sorted(set(bins))}
+    if len(groups) == 1:
+        return {base: analysed}
+    return {f"{base}-{tempi[bins == b].min():.0f}-{tempi[bins == b].max():.0f}bpm": g for b, g in groups.items()}
+
+
+def _style_from(name, genre, skeleton, fps, analysed) -> Style:
+    starts = np.cumsum([0] + [c.n_frames for c, _ in analysed])
+    return Style(
+        name=name, genre=genre, skeleton=skeleton, fps=float(fps),
+        clip_names=tuple(c.meta["name"] for c, _ in analysed),
+        clip_sources=tuple(c.meta["source"] for c, _ in analysed),
+        clip_starts=starts,
+        local_rot=np.concatenate([c.local_rot for c, _ in analysed]).astype(np.float32),
+        root_pos=np.concatenate([c.root_pos for c, _ in analysed]).astype(np.float32),
+        contacts=np.concatenate([a.contacts for _, a in analysed]),
+        energy=np.concatenate([a.energy for _, a in analysed]).astype(np.float32),
+        beat_frames=np.concatenate([a.beat_frames + s for (_, a), s in zip(analysed, starts)]).astype(np.int64),
+        clip_tempo_bpm=np.array([a.tempo_bpm for _, a in analysed]),
+        fingerprint=_fingerprint(*(c.local_rot for c, _ in analysed), *(a.beat_frames for _, a in analysed)),
+    )
+
+
+def _fingerprint(*arrays) -> str:
+    h = hashlib.blake2b(digest_size=16)
+    for a in arrays:
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
+# ---------------------------------------------------------------------------------------------
+# Storage
+
+
+def _skeleton_to_json(sk: Skeleton) -> dict:
+    return {"names": list(sk.names), "parents": sk.parents.tolist(), "offsets": sk.offsets.tolist(),
+            "channels": [list(c) for c in sk.channels],
+            "end_sites": {str(j): o.tolist() for j, o in sk.end_sites.items()}}
+
+
+def _skeleton_from_json(d: dict) -> Skeleton:
+    return Skeleton(tuple(d["names"]), np.array(d["parents"]), np.array(d["offsets"]),
+                    tuple(tuple(c) for c in d["channels"]),
+                    {int(j): np.array(o) for j, o in d["end_sites"].items()})
+
+
+def save_database(db: MotionDatabase, folder: Path) -> None:
+    """Write ``db`` to ``folder`` (created if needed) in the compact on-disk form."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    index = {"format": FORMAT_VERSION, "source": db.source, "notes": db.notes, "styles": {}}
+    for name, st in db.styles.items():
+        q = st.local_rot.astype(np.float64)
+        q = q * np.where(q[..., 3:4] < 0, -1.0, 1.0)  # one hemisphere, so quantisation is stable
+        moving = np.any(np.abs(q - q[:1]) > 1e-5, axis=(0, 2))
+        moving[0] = True
+        with atomic_output(folder / f"{name}.npz", "wb") as fh:
+            np.savez_compressed(
+                fh, rot_q=np.round(q[:, moving] * 32767).astype(np.int16), moving=moving,
+                static_rot=q[0].astype(np.float32), root_pos=st.root_pos, contacts=st.contacts,
+                energy=st.energy, beat_frames=st.beat_frames, clip_starts=st.clip_starts,
+                clip_tempo_bpm=st.clip_tempo_bpm)
+        index["styles"][name] = {
+            "genre": st.genre, "fps": st.fps, "skeleton": _skeleton_to_json(st.skeleton),
+            "clips": list(st.clip_names), "sources": list(st.clip_sources)}
+    with atomic_output(folder / "database.json", "w") as fh:
+        json.dump(index, fh, indent=1)
+
+
+def load_database(folder: Path) -> MotionDatabase:
+    """Load a database folder written by ``save_database``."""
+    folder = Path(folder)
+    try:
+        index = json.loads((folder / "database.json").read_text())
+    except FileNotFoundError:
+        raise InputError(f"{folder} is not a dancesynth database (no database.json)") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ModelError(f"{folder / 'database.json'} is corrupt ({exc}); rebuild the database") from None
+    if index.get("format") != FORMAT_VERSION:
+        raise ModelError(f"{folder} was written by another dancesynth version; rebuild it with 'dancesynth build-db'")
+    styles = {}
+    for name, meta in index["styles"].items():
+        path = folder / f"{name}.npz"
+        try:
+            raw = path.read_bytes()
+            with np.load(path) as z:
+                arr = {k: z[k] for k in z.files}
+        except (OSError, ValueError, KeyError) as exc:
+            raise ModelError(f"{path} is missing or corrupt ({exc}); rebuild the database") from None
+        sk = _skeleton_from_json(meta["skeleton"])
+        rot = np.repeat(arr["static_rot"][None], len(arr["root_pos"]), axis=0)
+        rot[:, arr["moving"]] = arr["rot_q"].astype(np.float32) / 32767.0
+        rot /= np.linalg.norm(rot, axis=-1, keepdims=True)
+        styles[name] = Style(
+            name=name, genre=meta["genre"], skeleton=sk, fps=float(meta["fps"]),
+            clip_names=tuple(meta["clips"]), clip_sources=tuple(meta["sources"]),
+            clip_starts=arr["clip_starts"], local_rot=rot, root_pos=arr["root_pos"],
+            contacts=arr["contacts"], energy=arr["energy"], beat_frames=arr["beat_frames"],
+            clip_tempo_bpm=arr["clip_tempo_bpm"], fingerprint=hashlib.blake2b(raw, digest_size=16).hexdigest())
+    return MotionDatabase(styles, source=str(folder), notes=index.get("notes", {}))
+
+
+# ---------------------------------------------------------------------------------------------
+# Finding a database
+
+
+def cache_dir() -> Path:
+    """Where built graphs and databases are cached (``$DANCESYNTH_CACHE`` or the user cache)."""
+    import os
+
+    root = os.environ.get("DANCESYNTH_CACHE") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "dancesynth")
+    return Path(root)
+
+
+def open_database(path: Path | None = None, config: AnalysisConfig = AnalysisConfig(), *,
+                  progress: Callable[[str], None] | None = None) -> MotionDatabase:
+    """The bundled database (``path=None``), a saved database folder, or a folder of BVH files.
+
+    A folder of BVH files is analysed once and the result cached; editing, adding or
+    removing a file, or changing ``config``, rebuilds it.
+    """
+    if path is None:
+        return load_database(BUNDLED_DATABASE)
+    path = Path(path)
+    if not path.is_dir():
+        raise InputError(f"database folder {path} does not exist")
+    if (path / "database.json").is_file():
+        return load_database(path)
+    sources = collect_sources(path)
+    h = hashlib.blake2b(repr((FORMAT_VERSION, config)).encode(), digest_size=16)
+    for genre, p in sources:
+        st = p.stat()
+        h.update(f"{genre}|{p.resolve()}|{st.st_size}|{st.st_mtime_ns}".encode())
+    cached = cache_dir() / "databases" / h.hexdigest()
+    if (cached / "database.json").is_file():
+        try:
+            return load_database(cached)
+        except ModelError:
+            pass  # a damaged cache entry is rebuilt below
+    db = build_database(sources, config, progress=progress)
+    db.source = str(path)
+    save_database(db, cached)
+    return load_database(cached)

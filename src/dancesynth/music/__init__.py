@@ -1,0 +1,22 @@
+"""Music analysis: beats, tempo, beat confidence and per-beat intensity.
+
+``analyze_music`` is the entry point; the pure functions it is made of are public
+too, so that streaming code can run them on segments:
+
+- ``onset_envelope`` -> ``track_beats`` (tracker chosen by name) -> beat times, tempo, confidence
+- ``beat_confidence`` (from ``beat_contrast`` and ``beat_onset_db``): how clearly the audio pulses
+- ``beat_intensity_db``: sound pressure level of each beat interval (Xu et al. §3.3)
+- ``steady_beat_grid``: the fallback beats when there is no clear pulse
+"""
+
+from .analysis import SILENCE_PEAK_DB, analyze_music
+from .beats import (ANALYSIS_SR, FEATURE_FPS, HOP_LENGTH, MIN_BEATS, MIN_CONFIDENCE, TRACKERS, beat_confidence,
+                    beat_contrast, beat_onset_db, onset_envelope, refine_beat_frames, sounding_span,
+                    steady_beat_grid, track_beats)
+from .intensity import FLOOR_DB, beat_intensity_db, rms_db
+
+__all__ = [
+    "ANALYSIS_SR", "FEATURE_FPS", "FLOOR_DB", "HOP_LENGTH", "MIN_BEATS", "MIN_CONFIDENCE", "SILENCE_PEAK_DB",
+    "TRACKERS", "analyze_music", "beat_confidence", "beat_contrast", "beat_intensity_db", "beat_onset_db",
+    "onset_envelope", "refine_beat_frames", "rms_db", "sounding_span", "steady_beat_grid", "track_beats",
+]
