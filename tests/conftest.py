@@ -27,3 +27,10 @@ requires_shared = pytest.mark.skipif(not SHARED_MOCAP.is_dir(), reason=f"shared 
 @pytest.fixture(scope="session")
 def bundled_song():
     return BUNDLED_MUSIC / "Kevin_MacLeod_-_Vibe_Ace.ogg"
+
+
+@pytest.fixture(scope="session")
+def bundled_db():
+    from dancesynth.motion.database import open_database
+
+    return open_database()

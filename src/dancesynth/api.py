@@ -63,7 +63,7 @@ def synthesise(engine: GraphEngine, grid: BeatGrid, duration_s: float, config: D
     if config.engine == "global":
         t = time.perf_counter()
         out = [engine.run_global(grid.times_s, grid.intensity_db, duration_s, seed=config.seed)]
-        return out, {"segments": 1, "step_s": [time.perf_counter() - t]}
+        return out, {"segments": 1, "step_s": [time.perf_counter() - t], "boundaries_s": np.zeros(0)}
     state = engine.initial_state(config.seed)
     bounds = segment_bounds(grid.times_s, config.segment_s)
     out, step_s = [], []
@@ -77,7 +77,8 @@ def synthesise(engine: GraphEngine, grid: BeatGrid, duration_s: float, config: D
         out.append(frames)
         if progress:
             progress("synthesis", i + 1, len(bounds))
-    return out, {"segments": len(bounds), "step_s": step_s}
+    return out, {"segments": len(bounds), "step_s": step_s,
+                 "boundaries_s": grid.times_s[[e for _, e in bounds[:-1]]]}
 
 
 def analyse(song, max_duration_s: float = 15 * 60.0) -> MusicFeatures:
@@ -114,7 +115,7 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
 
     t = time.perf_counter()
     grid = beat_grid(music, subdivide=subdivide)
-    engine = GraphEngine(style, graph, config.render)
+    engine = GraphEngine(style, graph, config.render, fps=config.fps)
     segments, stats = synthesise(engine, grid, music.duration_s, config, progress)
     timings["synthesis_s"] = time.perf_counter() - t
 
@@ -137,6 +138,7 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
         "music_beat_times_s": music.beat_times_s,
         "grid_times_s": grid.times_s,
         "transition_times_s": jumps,
+        "segment_times_s": stats["boundaries_s"],
         "source_frames": np.concatenate([s.source_pos for s in segments]),
         "warp_rates": np.concatenate([(s.pieces.f1 - s.pieces.f0) / (s.pieces.t1 - s.pieces.t0) / style.fps
                                       for s in segments]),

@@ -50,8 +50,7 @@ def beat_grid(music: MusicFeatures, *, subdivide: int = 1) -> BeatGrid:
         sub = (times[:-1, None] + np.diff(times)[:, None] * frac[None, :]).ravel()
         times = np.r_[sub, times[-1]]
         intensity = np.repeat(intensity, subdivide)
-        is_beat = np.r_[np.repeat(is_beat[:-1, None], subdivide, axis=1) & (frac == 0)[None, :], is_beat[-1:]]
-        is_beat = is_beat.ravel()
+        is_beat = np.r_[(is_beat[:-1, None] & (frac == 0)[None, :]).ravel(), is_beat[-1:]]
     return BeatGrid(times, intensity, is_beat, subdivide)
 
 

@@ -61,6 +61,23 @@ class Blend:
 
 
 @dataclass(frozen=True)
+class Rendered:
+    """Output frames of one ``render`` call.
+
+    ``raw_*`` are the same frames before jump blending; ``new_run`` marks the first
+    frame after each jump (where the raw motion changes source).
+    """
+
+    local_rot: np.ndarray
+    root_pos: np.ndarray
+    contacts: np.ndarray
+    source_pos: np.ndarray
+    raw_local: np.ndarray
+    raw_root: np.ndarray
+    new_run: np.ndarray
+
+
+@dataclass(frozen=True)
 class StitchState:
     """What rendering needs to remember between segments."""
 
@@ -138,7 +155,7 @@ def render(style: Style, pieces: Pieces, state: StitchState, *, fps: float, end_
            blend_s: float = 0.3, inclusive_end: bool = False):
     """Render output frames ``state.next_frame ...`` up to time ``end_s``.
 
-    Returns ``(state, local_rot (n, J, 4), root_pos (n, 3), contacts (n, 2), source_pos (n,))``.
+    Returns ``(state, Rendered)``.
     """
     k_pieces = len(pieces)
     yaws = np.empty(k_pieces)
@@ -175,12 +192,13 @@ def render(style: Style, pieces: Pieces, state: StitchState, *, fps: float, end_
     src = np.clip(src, style.clip_starts[clip], style.clip_starts[clip + 1] - 1)
 
     n, n_joints = len(idx), style.skeleton.n_joints
-    local = np.empty((n, n_joints, 4))
-    root = np.empty((n, 3))
+    raw_local = np.empty((n, n_joints, 4))
+    raw_root = np.empty((n, 3))
     contacts = np.zeros((n, 2), dtype=bool)
     for kk in np.unique(k):
         sel = k == kk
-        local[sel], root[sel], contacts[sel] = _place(style, src[sel], yaws[kk], offsets[kk])
+        raw_local[sel], raw_root[sel], contacts[sel] = _place(style, src[sel], yaws[kk], offsets[kk])
+    local, root = raw_local.copy(), raw_root.copy()
     starts = np.array([b[0] for b in blends])
     which = np.searchsorted(starts, t, side="right") - 1
     for b_i, (_, blend) in enumerate(blends):
@@ -194,4 +212,10 @@ def render(style: Style, pieces: Pieces, state: StitchState, *, fps: float, end_
     if final_blend is not None and (n == 0 or t[-1] >= final_blend.t0 + final_blend.duration):
         final_blend = None
     st = replace(st, next_frame=int(last + 1), blend=final_blend)
-    return st, local, root, contacts, src
+    # A new placement starts on the first frame of every piece that begins with a jump.
+    jumped = np.flatnonzero(pieces.jump)
+    new_run = np.zeros(n, dtype=bool)
+    if n:
+        first_frame = np.searchsorted(t, pieces.t0[jumped] - 1e-9)
+        new_run[first_frame[first_frame < n]] = True
+    return st, Rendered(local, root, contacts, src, raw_local, raw_root, new_run)

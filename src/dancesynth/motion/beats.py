@@ -17,7 +17,7 @@ Two detectors:
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage, signal
+from scipy import ndimage
 
 from .. import rotations as rot
 
@@ -91,6 +91,8 @@ def summed_speed(global_pos: np.ndarray, fps: float) -> np.ndarray:
 def kinematic_beats(speed: np.ndarray, fps: float, *, smooth_s: float = 0.15, polyorder: int = 2,
                     min_separation_s: float = 0.1) -> np.ndarray:
     """Frames of local minima of the Savitzky-Golay-smoothed speed curve."""
+    from scipy import signal  # costs ~0.8 s to import; only analysis needs it
+
     win = max(polyorder + 2, int(round(smooth_s * fps)) | 1)
     if speed.size <= win:
         return np.zeros(0, dtype=np.int64)

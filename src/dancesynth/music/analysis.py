@@ -15,9 +15,10 @@ import numpy as np
 from ..errors import InputError
 from ..io.audio import DEFAULT_MAX_DURATION_S, DEFAULT_MIN_DURATION_S, load_audio, resample
 from ..types import MusicFeatures
-from .beats import (ANALYSIS_SR, HOP_LENGTH, MIN_BEATS, MIN_CONFIDENCE, beat_onset_db, onset_envelope,
-                    steady_beat_grid, track_beats)
+from .beats import (DEFAULT_TRACKER, MIN_BEATS, MIN_CONFIDENCE, TRACKERS, beat_onset_db, steady_beat_grid,
+                    track_beats)
 from .intensity import beat_intensity_db, rms_db
+from .onset import ANALYSIS_SR, HOP_LENGTH, onset_envelope
 
 # Below this peak level a file is "silent" (a 16-bit file's dither sits near -90 dBFS,
 # a quiet but real recording peaks well above -40 dBFS).
@@ -25,7 +26,7 @@ SILENCE_PEAK_DB = -60.0
 
 
 def analyze_music(*, path=None, y: np.ndarray | None = None, sr: int | None = None,
-                  fallback_bpm: float = 100.0, tracker: str = "librosa",
+                  fallback_bpm: float = 100.0, tracker: str = DEFAULT_TRACKER,
                   min_confidence: float = MIN_CONFIDENCE, silence_db: float = SILENCE_PEAK_DB,
                   max_duration_s: float | None = DEFAULT_MAX_DURATION_S,
                   min_duration_s: float = DEFAULT_MIN_DURATION_S) -> MusicFeatures:
@@ -35,14 +36,16 @@ def analyze_music(*, path=None, y: np.ndarray | None = None, sr: int | None = No
     samples ``y`` (``(n,)`` or ``(channels, n)``) with their rate ``sr``. Audio is
     analysed mono at 22050 Hz with 20 ms feature frames.
 
-    Beats come from ``tracker`` (see ``dancesynth.music.beats.TRACKERS``); the
-    tempo is 60 / median beat interval. Beats are kept wherever the audio is not
-    silent (quiet passages and fade-outs keep theirs). When fewer than 4 beats are
-    found or their ``beat_confidence`` (pulse clarity, see
-    ``dancesynth.music.beats.beat_confidence``) is below ``min_confidence``, the
-    audio has no clear beat: the beats become a steady grid at ``fallback_bpm``
-    from 0 s to the end, with ``default_tempo=True``. ``intensity_db`` is the RMS level (dB re full scale,
-    floored at -100 dB) of each beat interval.
+    Beats come from ``tracker`` (see ``dancesynth.music.beats.TRACKERS``: the
+    default ``"dp"`` needs numpy only, ``"librosa"`` costs seconds of numba
+    compilation per process); the tempo is 60 / median beat interval. Beats are
+    kept wherever the audio is not silent (quiet passages and fade-outs keep
+    theirs). When fewer than 4 beats are found or their ``beat_confidence`` (pulse
+    clarity, see ``dancesynth.music.beats.beat_confidence``) is below
+    ``min_confidence``, the audio has no clear beat: the beats become a steady grid
+    at ``fallback_bpm`` from 0 s to the end, with ``default_tempo=True``.
+    ``intensity_db`` is the RMS level (dB re full scale, floored at -100 dB) of
+    each beat interval.
 
     Raises ``InputError`` for unusable input: a bad file (see ``load_audio``),
     audio shorter than ``min_duration_s`` or longer than ``max_duration_s``, or
@@ -52,6 +55,8 @@ def analyze_music(*, path=None, y: np.ndarray | None = None, sr: int | None = No
         raise InputError("analyze_music needs exactly one of path= (an audio file) or y= (samples, with sr=)")
     if path is not None and sr is not None:
         raise InputError(f"sr= describes samples given as y=; a file is always analysed at {ANALYSIS_SR} Hz")
+    if tracker not in TRACKERS:
+        raise InputError(f"unknown beat tracker {tracker!r}; choose one of {', '.join(sorted(TRACKERS))}")
     if not (np.isfinite(fallback_bpm) and 20.0 <= fallback_bpm <= 400.0):
         raise InputError(f"fallback tempo must be between 20 and 400 bpm, got {fallback_bpm!r}")
     if path is not None:

@@ -1,19 +1,26 @@
 """Beat tracking and beat confidence.
 
-The tracker sits behind one function, ``track_beats(..., tracker="librosa")``, so
-that trackers can be measured and swapped without touching callers. Every tracker
-works on the same onset-strength envelope (librosa's log-mel spectral flux) at
-``FEATURE_FPS`` frames per second and returns beat frames over the whole envelope;
-trimming to where the audio sounds, sub-frame refinement, times, tempo and
-confidence are done here the same way for all of them.
+The tracker sits behind one function, ``track_beats(..., tracker="dp")``, so
+that trackers can be measured and swapped without touching callers:
+
+- ``"dp"`` (default): Ellis' dynamic programming in numpy (``tracking.dp_beat_track``).
+- ``"librosa"``: the same algorithm as librosa implements it, for comparison. Its
+  tempo is rounded to whole frames; otherwise it gives the same beats.
+
+Every tracker works on the same onset-strength envelope (``onset.onset_envelope``,
+librosa's log-mel spectral flux computed in numpy) at ``FEATURE_FPS`` frames per
+second and returns beat frames over the whole envelope; trimming to where the
+audio sounds, sub-frame refinement, times, tempo and confidence are done here the
+same way for all of them.
 
 Why not librosa's own trimming (``beat_track(trim=True)``): it drops the leading
 and trailing beats whose onset strength is below half the song's average, so a
 song whose second half is 20 dB quieter lost its last 17 s of beats. Beats are
 instead kept wherever the audio is not silent (``sounding_span``).
 
-librosa is imported lazily: its first import compiles numba kernels (seconds), and
-``import dancesynth`` must stay light.
+librosa is imported only by the ``"librosa"`` tracker: its first import compiles
+numba kernels that it does not cache (about 4 s in every new process), and the
+default path must stay at numpy speed.
 """
 
 from __future__ import annotations
@@ -24,12 +31,8 @@ import numpy as np
 
 from .. import timebase
 from ..errors import InputError
-
-ANALYSIS_SR = 22050
-# 441 samples at 22050 Hz = 20 ms: 50 feature frames per second, an exact frame
-# rate (512 would give 43.07 fps); beats are refined below one frame anyway.
-HOP_LENGTH = 441
-FEATURE_FPS = ANALYSIS_SR / HOP_LENGTH
+from .onset import ANALYSIS_SR, HOP_LENGTH, onset_envelope
+from .tracking import dp_beat_track
 
 # Chance level of the beat contrast (see ``beat_confidence``): on noise, where the
 # tracker can only pick random peaks, the contrast stayed below
@@ -53,11 +56,10 @@ MIN_BEATS = 4
 SILENCE_BELOW_LOUD_DB = 50.0
 
 
-def onset_envelope(y: np.ndarray, sr: int = ANALYSIS_SR, *, hop_length: int = HOP_LENGTH) -> np.ndarray:
-    """Onset strength (librosa's spectral flux of the log-mel spectrogram), one value per hop."""
-    import librosa.onset
-
-    return librosa.onset.onset_strength(y=np.asarray(y, dtype=np.float32), sr=sr, hop_length=hop_length)
+def _track_dp(onset_env: np.ndarray, sr: int, hop_length: int) -> np.ndarray:
+    """Ellis' dynamic-programming tracker in numpy (``tracking.dp_beat_track``), untrimmed."""
+    frames, _ = dp_beat_track(onset_env, sr / hop_length)
+    return frames
 
 
 def _track_librosa(onset_env: np.ndarray, sr: int, hop_length: int) -> np.ndarray:
@@ -69,13 +71,17 @@ def _track_librosa(onset_env: np.ndarray, sr: int, hop_length: int) -> np.ndarra
     return np.asarray(frames, dtype=np.int64)
 
 
+# name -> tracker(onset_env, sr, hop_length) -> beat frames over the whole envelope.
 TRACKERS: dict[str, Callable[[np.ndarray, int, int], np.ndarray]] = {
+    "dp": _track_dp,
     "librosa": _track_librosa,
 }
+DEFAULT_TRACKER = "dp"
 
 
 def track_beats(y: np.ndarray | None = None, sr: int = ANALYSIS_SR, *, onset_env: np.ndarray | None = None,
-                tracker: str = "librosa", hop_length: int = HOP_LENGTH) -> tuple[np.ndarray, float, float]:
+                tracker: str = DEFAULT_TRACKER, hop_length: int = HOP_LENGTH,
+                ) -> tuple[np.ndarray, float, float]:
     """Find the beats of mono audio.
 
     Give the samples ``y``, and optionally their precomputed ``onset_env`` (from

@@ -18,7 +18,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ...motion.database import Style
-from ..stitch import Pieces, StitchState, render
+from ...motion.roles import find_roles
+from ..footlock import FootLockState, lock_feet
+from ..stitch import Pieces, Rendered, StitchState, render
 from .meta_graph import MetaMotionGraph
 from .search import Path, search
 
@@ -40,10 +42,10 @@ class MusicSegment:
 
 @dataclass(frozen=True)
 class EngineConfig:
-    fps: float = 30.0
     blend_s: float = 0.3              # inertialization time at a jump
     repeat_penalty: float = 0.0       # cost of revisiting a recently danced beat (0 = paper)
     repeat_half_life_beats: float = 32.0
+    foot_lock: bool = True            # hold planted feet still through blends (leg IK)
 
 
 @dataclass(frozen=True)
@@ -53,9 +55,10 @@ class StreamState:
     n_heard: int = 0                    # running statistics of music intensity (Welford)
     mean_db: float = 0.0
     m2_db: float = 0.0
-    start_costs: np.ndarray | None = None  # seeded preference among InitS
+    start_nodes: np.ndarray | None = None  # InitS, or the one start a seed picked
     recent: np.ndarray | None = None       # (N,) decayed visit counts, for repeat_penalty
     stitch: StitchState = field(default_factory=StitchState)
+    feet: FootLockState = field(default_factory=FootLockState)
     segments: int = 0
 
 
@@ -69,6 +72,10 @@ class SegmentFrames:
     source_pos: np.ndarray
     path: Path
     pieces: Pieces
+
+    @classmethod
+    def of(cls, frames: Rendered, local_rot: np.ndarray, path: Path, pieces: Pieces) -> "SegmentFrames":
+        return cls(local_rot, frames.root_pos, frames.contacts, frames.source_pos, path, pieces)
 
 
 def standardise(values: np.ndarray, mean: float, std: float) -> np.ndarray:
@@ -86,13 +93,18 @@ class GraphEngine:
     style: Style
     graph: MetaMotionGraph
     config: EngineConfig = EngineConfig()
+    fps: float = 30.0
 
-    def initial_state(self, seed: int | None = None) -> StreamState:
-        """Fresh state; a seed gives each InitS clip a random head start (variety between runs)."""
-        costs = None
+    def initial_state(self, seed: int | None = None, needed_beats: float = np.inf) -> StreamState:
+        """Fresh state. Without a seed the first segment may start at any clip's first beat
+        (InitS, as in the paper); a seed picks one of the starts that can dance
+        ``needed_beats`` beats, so different seeds give different dances."""
+        start = self.graph.init_nodes
         if seed is not None:
-            costs = np.random.default_rng(seed).uniform(0.0, 1.0, len(self.graph.init_nodes))
-        return StreamState(start_costs=costs)
+            able = start[self.graph.capacity[start] >= needed_beats]
+            if len(able):
+                start = np.array([np.random.default_rng(seed).choice(able)])
+        return StreamState(start_nodes=start)
 
     def step(self, state: StreamState, segment: MusicSegment) -> tuple[StreamState, SegmentFrames]:
         """Synthesise and render one music segment."""
@@ -106,35 +118,42 @@ class GraphEngine:
             m2 += d * (x - mean)
         std = np.sqrt(m2 / n) if n else 0.0
         if state.node is None:
-            start, costs = self.graph.init_nodes, state.start_costs
+            start = self.graph.init_nodes if state.start_nodes is None else state.start_nodes
         else:
-            start, costs = np.array([state.node]), None
+            start = np.array([state.node])
         thc = np.inf if segment.remaining_beats is None else float(segment.remaining_beats)
         recent = state.recent if state.recent is not None else np.zeros(self.graph.n_nodes)
         penalty = self.config.repeat_penalty * recent if self.config.repeat_penalty > 0 else None
         path = search(self.graph, standardise(inten, mean, std), np.diff(beats), start_nodes=start,
-                      prev_duration_s=state.prev_duration_s, thc=thc, start_costs=costs, node_penalty=penalty)
+                      prev_duration_s=state.prev_duration_s, thc=thc, node_penalty=penalty)
         decay = 0.5 ** (1.0 / self.config.repeat_half_life_beats)
         recent = recent * decay ** len(inten)
         np.add.at(recent, path.nodes[1:], decay ** np.arange(len(inten) - 1, -1, -1))
         pieces = pieces_from_path(self.graph, path, beats)
         last = segment.end_s is not None
-        stitch, local, root, contacts, src = render(
-            self.style, pieces, state.stitch, fps=self.config.fps,
+        stitch, frames = render(
+            self.style, pieces, state.stitch, fps=self.fps,
             end_s=segment.end_s if last else float(beats[-1]), blend_s=self.config.blend_s, inclusive_end=last)
+        local, feet = self._lock_feet(frames, state.feet)
         new_state = replace(state, node=int(path.nodes[-1]), prev_duration_s=float(beats[-1] - beats[-2]),
                             n_heard=n, mean_db=mean, m2_db=m2, stitch=stitch, segments=state.segments + 1,
-                            recent=recent)
-        return new_state, SegmentFrames(local, root, contacts, src, path, pieces)
+                            recent=recent, feet=feet)
+        return new_state, SegmentFrames.of(frames, local, path, pieces)
 
     def run_global(self, beat_times_s: np.ndarray, intensity_db: np.ndarray, end_s: float,
                    seed: int | None = None) -> SegmentFrames:
         """The global-DP baseline: one search over the whole song, then one render."""
         inten = np.asarray(intensity_db, dtype=np.float64)
-        state = self.initial_state(seed)
+        state = self.initial_state(seed, needed_beats=len(inten))
         path = search(self.graph, standardise(inten, inten.mean(), inten.std()), np.diff(beat_times_s),
-                      start_nodes=self.graph.init_nodes, thc=0.0, start_costs=state.start_costs)
+                      start_nodes=state.start_nodes, thc=0.0)
         pieces = pieces_from_path(self.graph, path, np.asarray(beat_times_s, dtype=np.float64))
-        _, local, root, contacts, src = render(self.style, pieces, state.stitch, fps=self.config.fps,
-                                               end_s=end_s, blend_s=self.config.blend_s, inclusive_end=True)
-        return SegmentFrames(local, root, contacts, src, path, pieces)
+        _, frames = render(self.style, pieces, state.stitch, fps=self.fps,
+                           end_s=end_s, blend_s=self.config.blend_s, inclusive_end=True)
+        local, _ = self._lock_feet(frames, state.feet)
+        return SegmentFrames.of(frames, local, path, pieces)
+
+    def _lock_feet(self, frames: Rendered, feet: FootLockState):
+        if not self.config.foot_lock:
+            return frames.local_rot, feet
+        return lock_feet(self.style.skeleton, find_roles(self.style.skeleton), frames, feet, fps=self.fps)

@@ -223,7 +223,7 @@ def build_graph(style: Style, config: GraphConfig = GraphConfig()) -> MetaMotion
         style=style.name, fps=style.fps, node_frame=frames, node_clip=clip, next_node=next_node,
         prev_node=prev_node, w1=w1, w1_z=w1_z, bi_src=src, bi_dst=dst, bi_rd=np.concatenate(rd_l).astype(np.float64),
         capacity=np.zeros(n), init_nodes=np.flatnonzero(np.r_[True, clip[1:] != clip[:-1]]), thr=config.thr)
-    _finish(graph)
+    derive_steps(graph)
 
     if config.close_dead_ends and not np.isinf(graph.capacity[graph.init_nodes]).any():
         # No start can go on forever (a tiny database without cycles): link every dead end
@@ -238,12 +238,12 @@ def build_graph(style: Style, config: GraphConfig = GraphConfig()) -> MetaMotion
             graph.bi_dst = np.r_[graph.bi_dst, best, ends]
             graph.bi_rd = np.r_[graph.bi_rd, best_rd, best_rd]
             graph.n_forced = len(ends)
-            _finish(graph)
+            derive_steps(graph)
     return graph
 
 
-def _finish(g: MetaMotionGraph) -> None:
-    """Derive the step list (sorted by destination) and the capacities."""
+def derive_steps(g: MetaMotionGraph) -> None:
+    """Derive the step list (sorted by destination) and the capacities from nodes and edges."""
     n = g.n_nodes
     mono = np.flatnonzero(g.next_node >= 0)
     usable = g.next_node[g.bi_dst] >= 0  # a jump must be followed by a mono edge

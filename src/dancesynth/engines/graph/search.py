@@ -54,7 +54,7 @@ def _rate_factor(rho: np.ndarray, prev_duration: float | None, duration: float) 
 
 def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndarray, *,
            start_nodes: np.ndarray, prev_duration_s: float | None = None, thc: float = np.inf,
-           start_costs: np.ndarray | None = None, node_penalty: np.ndarray | None = None) -> Path:
+           node_penalty: np.ndarray | None = None) -> Path:
     """Best path for K beat intervals (eq. 7-9).
 
     ``intensity_z`` (K,) are the normalised music intensities, ``durations_s`` (K,)
@@ -67,7 +67,7 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     durations_s = np.asarray(durations_s, dtype=np.float64)
     n, k_steps = graph.n_nodes, len(intensity_z)
     cost = np.full(n, np.inf)
-    cost[np.asarray(start_nodes)] = 0.0 if start_costs is None else start_costs
+    cost[np.asarray(start_nodes)] = 0.0
     back = np.full((k_steps, n), -1, dtype=np.int32)
 
     src, via = graph.step_src, graph.step_via

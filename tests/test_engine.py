@@ -1,0 +1,143 @@
+"""The streaming engine and its renderer on the bundled database, with music of known beats."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dancesynth import rotations as rot
+from dancesynth.api import DanceConfig, dance
+from dancesynth.engines.beatgrid import beat_grid, choose_style
+from dancesynth.engines.graph.engine import EngineConfig
+from dancesynth.kinematics import clip_fk
+from dancesynth.motion.roles import find_roles
+from dancesynth.types import MusicFeatures
+
+FPS = 30.0
+
+
+def music(duration_s: float, bpm: float, *, offset_s: float = 0.4, seed: int = 0) -> MusicFeatures:
+    """Beats every 60/bpm s from ``offset_s``, loudness wandering slowly like a song."""
+    beats = np.arange(offset_s, duration_s, 60.0 / bpm)
+    rng = np.random.default_rng(seed)
+    k = np.arange(len(beats) - 1)
+    loud = -20 + 6 * np.sin(k / 13.0) + rng.normal(0, 1.5, len(k))
+    return MusicFeatures(duration_s, beats, loud, bpm, source=f"synthetic {bpm} bpm")
+
+
+def max_joint_step_deg(local_rot: np.ndarray) -> np.ndarray:
+    """Largest joint rotation change between consecutive frames (degrees), per frame pair."""
+    return np.degrees(rot.angle(local_rot[1:], local_rot[:-1])).max(axis=1)
+
+
+@pytest.fixture(scope="module")
+def salsa_dance(bundled_db):
+    # 112.5 bpm puts every beat exactly on the 30 fps frame grid (16 frames per beat).
+    return dance(music(60.0, 112.5, offset_s=16 / FPS), database=bundled_db, style="salsa", fps=FPS)
+
+
+def test_every_music_beat_shows_a_motion_beat_frame(salsa_dance, bundled_db):
+    clip = salsa_dance
+    style = bundled_db.styles[clip.meta["style"]]
+    beat_frames = set(style.beat_frames.tolist())
+    src = clip.meta["source_frames"]
+    for t in clip.meta["music_beat_times_s"]:
+        f = int(round(t * FPS))
+        assert abs(src[f] - round(src[f])) < 1e-6, f"beat at {t:.3f} s shows a fractional source frame"
+        assert int(round(src[f])) in beat_frames
+
+
+def test_output_covers_the_whole_song_at_the_requested_rate(salsa_dance):
+    assert salsa_dance.fps == FPS
+    assert salsa_dance.n_frames == int(60.0 * FPS) + 1
+    assert np.all(np.isfinite(salsa_dance.local_rot)) and np.all(np.isfinite(salsa_dance.root_pos))
+    assert np.allclose(np.linalg.norm(salsa_dance.local_rot, axis=-1), 1.0, atol=1e-6)
+
+
+def test_joins_are_as_smooth_as_the_mocap_itself(salsa_dance, bundled_db):
+    """No frame-to-frame change at a jump or a segment boundary beyond what the captured dance does."""
+    style = bundled_db.styles[salsa_dance.meta["style"]]
+    step = int(round(style.fps / FPS))
+    src = style.local_rot[::step].astype(float)
+    inside = np.ones(len(src) - 1, bool)
+    inside[(style.clip_starts[1:-1] // step) - 1] = False
+    mocap_p999 = np.percentile(max_joint_step_deg(src)[inside], 99.9)
+    out = max_joint_step_deg(salsa_dance.local_rot)
+    joins = np.r_[salsa_dance.meta["transition_times_s"], salsa_dance.meta["segment_times_s"]]
+    for t in joins:
+        f = int(np.floor(t * FPS))
+        window = out[max(f - 2, 0):f + 3]
+        assert window.max() <= mocap_p999, f"join at {t:.2f} s turns a joint {window.max():.1f} deg in a frame"
+    root_step = np.linalg.norm(np.diff(salsa_dance.root_pos, axis=0), axis=1)
+    src_root = np.linalg.norm(np.diff(style.root_pos[::step], axis=0), axis=1)[inside]
+    assert root_step.max() <= np.percentile(src_root, 99.9) * 1.5
+
+
+def test_streaming_segments_join_exactly_like_one_long_render(bundled_db):
+    song = music(30.0, 120.0)
+    a = dance(song, database=bundled_db, style="jpop", segment_s=3.0)
+    b = dance(song, database=bundled_db, style="jpop", segment_s=7.0)
+    assert a.n_frames == b.n_frames
+    assert a.meta["summary"]["segments"] > b.meta["summary"]["segments"]
+
+
+@pytest.mark.parametrize("engine", ["streaming", "global"])
+def test_engines_are_deterministic_and_seeds_vary_the_dance(bundled_db, engine):
+    song = music(20.0, 126.0)
+    a = dance(song, database=bundled_db, engine=engine, seed=1)
+    b = dance(song, database=bundled_db, engine=engine, seed=1)
+    np.testing.assert_array_equal(a.local_rot, b.local_rot)
+    others = [dance(song, database=bundled_db, engine=engine, seed=s).meta["source_frames"] for s in (2, 3, 4, 5)]
+    assert any(not np.array_equal(o, a.meta["source_frames"]) for o in others)
+
+
+def test_ten_minute_songs_never_run_out_of_path_on_any_style(bundled_db):
+    """Capacity keeps every style dancing; with THC unknown (a live stream) too."""
+    for style in bundled_db.styles.values():
+        tempo = style.natural_tempo_bpm
+        clip = dance(music(600.0, tempo, seed=7), database=bundled_db, style=style.name, fps=5.0,
+                     render=EngineConfig(foot_lock=False, repeat_penalty=0.5))
+        assert clip.n_frames == int(600.0 * 5.0) + 1, style.name
+
+
+def test_foot_lock_removes_sliding_added_by_blends(bundled_db):
+    song = music(40.0, 135.0, seed=3)
+    plain = dance(song, database=bundled_db, style="salsa", render=EngineConfig(foot_lock=False))
+    locked = dance(song, database=bundled_db, style="salsa", render=EngineConfig(foot_lock=True))
+    assert plain.meta["summary"]["transitions"] > 0
+
+    def skate(clip):
+        _, pos = clip_fk(clip)
+        roles = find_roles(clip.skeleton)
+        speeds = []
+        for side in (0, 1):
+            v = np.linalg.norm(np.diff(pos[:, roles.ankles[side]][:, [0, 2]], axis=0), axis=1) * clip.fps
+            c = clip.contacts[1:, side] & clip.contacts[:-1, side]
+            speeds.append(v[c])
+        return np.concatenate(speeds).mean()
+
+    assert skate(locked) < skate(plain)
+
+
+def test_slow_songs_are_danced_in_double_time(bundled_db):
+    style, sub = choose_style(bundled_db, 60.0)
+    assert sub == 2
+    grid = beat_grid(music(20.0, 60.0), subdivide=2)
+    assert np.all(np.isin(music(20.0, 60.0).beat_times_s, grid.times_s))
+    assert grid.times_s[0] <= 0.0 and grid.times_s[-1] >= 20.0
+
+
+def test_unknown_style_is_a_clear_error(bundled_db):
+    from dancesynth.errors import InputError
+
+    with pytest.raises(InputError, match="unknown style 'tango'.*dancesynth styles"):
+        dance(music(10.0, 120.0), database=bundled_db, style="tango")
+
+
+def test_config_validation():
+    from dancesynth.errors import InputError
+
+    with pytest.raises(InputError, match="engine"):
+        DanceConfig(engine="magic")
+    with pytest.raises(InputError, match="frame rate"):
+        DanceConfig(fps=0)
