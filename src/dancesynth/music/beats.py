@@ -46,8 +46,10 @@ CHANCE_SCALE = 0.42
 # analysis frames), the bundled songs 1.8-5.3 dB, their weakest 10 s excerpt 1.3 dB.
 ONSET_FLOOR_DB = 0.3
 ONSET_FULL_DB = 1.0
-# A beat is "clear" at or above this confidence. The bundled songs score 0.15-0.41,
-# noise and sustained chords at most about 0.01.
+# A beat is "clear" at or above this confidence. The bundled songs score 0.15-0.42,
+# noise and sustained chords at most about 0.01 (re-measured with the numpy
+# envelope and the "dp" tracker: songs 0.153-0.421; white, pink and brown noise of
+# 4.5 s to 15 min and organ chords at most 0.006).
 MIN_CONFIDENCE = 0.05
 # Fewer beats than this cannot show a pulse (a tempo needs several intervals).
 MIN_BEATS = 4
@@ -220,7 +222,7 @@ def beat_confidence(onset_env: np.ndarray, beat_frames) -> float:
     envelope only ripples (0.2 dB) with the analysis frames, periodically enough to
     be tracked; its weight is 0. Music's onsets measure 1.3 dB and more.
 
-    The bundled songs score 0.15 to 0.41, click tracks about 0.6; noise and chords
+    The bundled songs score 0.15 to 0.42, click tracks about 0.6; noise and chords
     -0.2 to 0.01 (``MIN_CONFIDENCE`` is 0.05). Fewer than two beats give 0.
     """
     frames = np.asarray(beat_frames)

@@ -13,6 +13,7 @@ whole song with intensities standardised over the whole song.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -72,10 +73,13 @@ class SegmentFrames:
     source_pos: np.ndarray
     path: Path
     pieces: Pieces
+    search_s: float = 0.0   # time spent in the path search (the paper's "synthesis")
+    render_s: float = 0.0   # time spent turning the path into frames
 
     @classmethod
-    def of(cls, frames: Rendered, local_rot: np.ndarray, path: Path, pieces: Pieces) -> "SegmentFrames":
-        return cls(local_rot, frames.root_pos, frames.contacts, frames.source_pos, path, pieces)
+    def of(cls, frames: Rendered, local_rot: np.ndarray, path: Path, pieces: Pieces,
+           search_s: float, render_s: float) -> "SegmentFrames":
+        return cls(local_rot, frames.root_pos, frames.contacts, frames.source_pos, path, pieces, search_s, render_s)
 
 
 def standardise(values: np.ndarray, mean: float, std: float) -> np.ndarray:
@@ -124,11 +128,13 @@ class GraphEngine:
         thc = np.inf if segment.remaining_beats is None else float(segment.remaining_beats)
         recent = state.recent if state.recent is not None else np.zeros(self.graph.n_nodes)
         penalty = self.config.repeat_penalty * recent if self.config.repeat_penalty > 0 else None
+        t0 = time.perf_counter()
         path = search(self.graph, standardise(inten, mean, std), np.diff(beats), start_nodes=start,
                       prev_duration_s=state.prev_duration_s, thc=thc, node_penalty=penalty)
         decay = 0.5 ** (1.0 / self.config.repeat_half_life_beats)
         recent = recent * decay ** len(inten)
         np.add.at(recent, path.nodes[1:], decay ** np.arange(len(inten) - 1, -1, -1))
+        t1 = time.perf_counter()
         pieces = pieces_from_path(self.graph, path, beats)
         last = segment.end_s is not None
         stitch, frames = render(
@@ -138,20 +144,22 @@ class GraphEngine:
         new_state = replace(state, node=int(path.nodes[-1]), prev_duration_s=float(beats[-1] - beats[-2]),
                             n_heard=n, mean_db=mean, m2_db=m2, stitch=stitch, segments=state.segments + 1,
                             recent=recent, feet=feet)
-        return new_state, SegmentFrames.of(frames, local, path, pieces)
+        return new_state, SegmentFrames.of(frames, local, path, pieces, t1 - t0, time.perf_counter() - t1)
 
     def run_global(self, beat_times_s: np.ndarray, intensity_db: np.ndarray, end_s: float,
                    seed: int | None = None) -> SegmentFrames:
         """The global-DP baseline: one search over the whole song, then one render."""
         inten = np.asarray(intensity_db, dtype=np.float64)
         state = self.initial_state(seed, needed_beats=len(inten))
+        t0 = time.perf_counter()
         path = search(self.graph, standardise(inten, inten.mean(), inten.std()), np.diff(beat_times_s),
                       start_nodes=state.start_nodes, thc=0.0)
+        t1 = time.perf_counter()
         pieces = pieces_from_path(self.graph, path, np.asarray(beat_times_s, dtype=np.float64))
         _, frames = render(self.style, pieces, state.stitch, fps=self.fps,
                            end_s=end_s, blend_s=self.config.blend_s, inclusive_end=True)
         local, _ = self._lock_feet(frames, state.feet)
-        return SegmentFrames.of(frames, local, path, pieces)
+        return SegmentFrames.of(frames, local, path, pieces, t1 - t0, time.perf_counter() - t1)
 
     def _lock_feet(self, frames: Rendered, feet: FootLockState):
         if not self.config.foot_lock:

@@ -36,6 +36,8 @@ class GraphConfig:
     """Parameters of graph construction; paper values where the paper gives them."""
 
     ths: float = 3.0            # eq. (1): bi-directional edge when rd < THS (paper: 3.0)
+    neighbour_s: float = 1 / 30  # eq. (1)'s "t-1, t+1": neighbouring frames at 30 fps, the rate motion
+                                 # graphs are usually built at (the paper does not state its rate)
     thr: float = 1.5            # eq. (2): floor of the bi-directional weight, must be > 1
     min_jump_beats: int = 4     # no jump between beats of one clip closer than this (0 = paper);
                                 # stops the search looping on one beat
@@ -167,16 +169,26 @@ class _SimilarityRows:
         self.w = w[joints]
         lo = style.clip_starts[clip]
         hi = style.clip_starts[clip + 1] - 1
-        before = _poses(style, np.clip(frames - 1, lo, hi), joints)
-        after = _poses(style, np.clip(frames + 1, lo, hi), joints)
+        step = max(1, int(round(config.neighbour_s * style.fps)))
+        before = _poses(style, np.clip(frames - step, lo, hi), joints)
+        after = _poses(style, np.clip(frames + step, lo, hi), joints)
         self.local = _distance(before, after, self.w)
         self.q = _poses(style, frames, joints)
+        self.q32 = self.q.astype(np.float32)
         self.clip = clip
         self.min_gap = max(config.min_jump_beats, 1)
 
+    def block_rows(self, budget_bytes: float = 64e6) -> int:
+        """Rows per block so that one block's temporaries stay near ``budget_bytes``."""
+        per_row = len(self.q) * self.q.shape[1] * 4 * 3
+        return int(max(1, min(1024, budget_bytes // max(per_row, 1))))
+
     def __call__(self, rows: np.ndarray) -> np.ndarray:
-        dots = np.abs(np.einsum("ajk,bjk->abj", self.q[rows], self.q))
-        d = np.sum(self.w * (2.0 * np.arccos(np.minimum(dots, 1.0))) ** 2, axis=-1)
+        dots = np.abs(np.einsum("ajk,bjk->abj", self.q32[rows], self.q32))
+        np.minimum(dots, 1.0, out=dots)
+        ang = np.arccos(dots, out=dots)
+        np.square(ang, out=ang)
+        d = (ang @ (4.0 * self.w).astype(np.float32)).astype(np.float64)
         rd = d / np.maximum(self.local[rows, None] + self.local[None, :], 1e-12)
         idx = np.arange(len(self.q))
         near = (self.clip[rows, None] == self.clip[None, :]) & (np.abs(rows[:, None] - idx[None, :]) < self.min_gap)
@@ -210,8 +222,9 @@ def build_graph(style: Style, config: GraphConfig = GraphConfig()) -> MetaMotion
     # Bi-directional edges, eq. (1)-(3), a block of rows at a time.
     rd_rows = _SimilarityRows(style, frames, clip, config)
     src_l, dst_l, rd_l = [], [], []
-    for s in range(0, n, 256):
-        rows = np.arange(s, min(s + 256, n))
+    block = rd_rows.block_rows()
+    for s in range(0, n, block):
+        rows = np.arange(s, min(s + block, n))
         rd = rd_rows(rows)
         r, c = np.nonzero(rd < config.ths)
         src_l.append(rows[r])
