@@ -8,7 +8,7 @@ Two detectors:
   window); where that projection turns (its velocity changes sign) the movement
   changes direction. The turning strengths of all windows are overlap-added into a
   "motion onset" curve, and a regular beat sequence is induced from it with the
-  same dynamic-programming beat tracker we use for music (librosa's).
+  same dynamic-programming beat tracker we use for music (``beat_tracking``).
 - ``kinematic_beats`` -- local minima of the summed joint speed after
   Savitzky-Golay smoothing (Aristidou et al. §5.2.1; Kim et al. 2003). Irregular but
   simple; the evaluation metrics use these.
@@ -20,6 +20,7 @@ import numpy as np
 from scipy import ndimage
 
 from .. import rotations as rot
+from ..beat_tracking import dp_beat_track
 
 
 def pose_features(global_pos: np.ndarray, global_root_rot: np.ndarray) -> np.ndarray:
@@ -64,21 +65,22 @@ def pca_turn_envelope(features: np.ndarray, fps: float, *, window_s: float = 1.0
     return np.convolve(env, np.hanning(5) / np.hanning(5).sum(), mode="same")
 
 
-def induce_beats(envelope: np.ndarray, fps: float, *, start_bpm: float = 110.0) -> np.ndarray:
-    """A regular beat sequence (frame indices) from a motion onset envelope."""
-    import librosa  # heavy; only the database builder needs it
+def induce_beats(envelope: np.ndarray, fps: float, *, start_bpm: float = 110.0, std_bpm: float = 1.0) -> np.ndarray:
+    """A regular beat sequence (frame indices) from a motion onset envelope.
 
+    The same dynamic-programming tracker as for music; ``start_bpm`` and ``std_bpm``
+    (octaves) set its tempo prior.
+    """
     if envelope.size < 4 or not np.any(envelope > 0):
         return np.zeros(0, dtype=np.int64)
-    _, frames = librosa.beat.beat_track(onset_envelope=envelope, sr=fps, hop_length=1,
-                                        start_bpm=start_bpm, trim=False)
+    frames, _ = dp_beat_track(envelope, fps, start_bpm=start_bpm, std_bpm=std_bpm)
     return np.unique(np.asarray(frames, dtype=np.int64))
 
 
-def pca_beats(global_pos: np.ndarray, global_root_rot: np.ndarray, fps: float, **kwargs) -> np.ndarray:
-    """Motion beat frames by short-term PCA (see module docstring)."""
+def pca_beats(global_pos: np.ndarray, global_root_rot: np.ndarray, fps: float, **prior) -> np.ndarray:
+    """Motion beat frames by short-term PCA (see module docstring); ``prior`` goes to ``induce_beats``."""
     env = pca_turn_envelope(pose_features(global_pos, global_root_rot), fps)
-    return induce_beats(env, fps, **kwargs)
+    return induce_beats(env, fps, **prior)
 
 
 def summed_speed(global_pos: np.ndarray, fps: float) -> np.ndarray:

@@ -134,12 +134,17 @@ class ClipAnalysis:
     tempo_bpm: float
 
 
-def analyse_clip(clip: MotionClip, config: AnalysisConfig = AnalysisConfig()) -> ClipAnalysis:
-    """Motion beats, kinetic energy per frame and foot contacts of one clip."""
+def analyse_clip(clip: MotionClip, config: AnalysisConfig = AnalysisConfig(), *,
+                 tempo_prior: tuple[float, float] = (110.0, 1.0)) -> ClipAnalysis:
+    """Motion beats, kinetic energy per frame and foot contacts of one clip.
+
+    ``tempo_prior`` is (centre bpm, width in octaves) for inducing regular beats.
+    """
     sk = clip.skeleton
     g_rot, g_pos = fk(clip.local_rot, clip.root_pos, sk.offsets, sk.parents, clip.local_pos)
     if config.beat_method == "pca":
-        beats = motion_beats.pca_beats(g_pos, g_rot[:, 0], clip.fps)
+        beats = motion_beats.pca_beats(g_pos, g_rot[:, 0], clip.fps, start_bpm=tempo_prior[0],
+                                       std_bpm=tempo_prior[1])
     elif config.beat_method == "kinematic":
         beats = motion_beats.kinematic_beats(motion_beats.summed_speed(g_pos, clip.fps), clip.fps)
     else:
@@ -221,6 +226,7 @@ def build_database(sources: Iterable[tuple[str, Path]], config: AnalysisConfig =
             a = analyse_clip(c, config)
             if len(a.beat_frames) >= config.min_beats_per_clip:
                 analysed.append((c, a))
+        analysed = _consistent_metre(analysed, config)
         if not analysed:
             continue
         base = genre if topologies_per_genre[genre] == 1 else f"{genre}-{len(names)}j"
@@ -230,6 +236,31 @@ def build_database(sources: Iterable[tuple[str, Path]], config: AnalysisConfig =
         raise InputError(f"no clip had at least {config.min_beats_per_clip} motion beats: the database "
                          "needs dance clips several seconds long")
     return MotionDatabase(styles)
+
+
+def _consistent_metre(analysed: list, config: AnalysisConfig) -> list:
+    """Re-count clips whose beat is far from the genre's at the genre's metrical level.
+
+    A beat tracker may count one take in quarter notes and the next in dotted or half
+    notes; jumps between such clips would not land on the same kind of beat. Clips
+    more than 25 % away from the genre's (duration-weighted) median tempo are tracked
+    again with a narrow prior around it, and keep the new beats if they moved closer.
+    """
+    if config.beat_method != "pca" or len(analysed) < 2:
+        return analysed
+    tempi = np.array([a.tempo_bpm for _, a in analysed])
+    weights = np.array([c.n_frames for c, _ in analysed], dtype=float)
+    order = np.argsort(tempi)
+    median = float(tempi[order][np.searchsorted(np.cumsum(weights[order]), weights.sum() / 2)])
+    out = []
+    for c, a in analysed:
+        if abs(np.log(a.tempo_bpm / median)) > np.log(1.25):
+            again = analyse_clip(c, config, tempo_prior=(median, 0.25))
+            if (len(again.beat_frames) >= config.min_beats_per_clip
+                    and abs(np.log(again.tempo_bpm / median)) < abs(np.log(a.tempo_bpm / median))):
+                a = again
+        out.append((c, a))
+    return out
 
 
 def _split_by_tempo(base: str, analysed: list, width: float, min_minutes: float) -> dict[str, list]:

@@ -20,7 +20,7 @@ from .beats import (DEFAULT_TRACKER, MIN_BEATS, MIN_CONFIDENCE, TRACKERS, beat_c
                     beat_onset_db, refine_beat_frames, sounding_span, steady_beat_grid, track_beats)
 from .intensity import FLOOR_DB, beat_intensity_db, rms_db
 from .onset import ANALYSIS_SR, FEATURE_FPS, HOP_LENGTH, mel_filterbank, onset_envelope
-from .tracking import dp_beat_track, estimate_tempo
+from ..beat_tracking import dp_beat_track, estimate_tempo
 
 __all__ = [
     "ANALYSIS_SR", "DEFAULT_TRACKER", "FEATURE_FPS", "FLOOR_DB", "HOP_LENGTH", "MIN_BEATS", "MIN_CONFIDENCE",

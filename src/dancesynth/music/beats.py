@@ -32,7 +32,7 @@ import numpy as np
 from .. import timebase
 from ..errors import InputError
 from .onset import ANALYSIS_SR, HOP_LENGTH, onset_envelope
-from .tracking import dp_beat_track
+from ..beat_tracking import dp_beat_track
 
 # Chance level of the beat contrast (see ``beat_confidence``): on noise, where the
 # tracker can only pick random peaks, the contrast stayed below

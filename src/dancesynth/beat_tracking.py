@@ -1,7 +1,8 @@
 """Ellis' (2007) dynamic-programming beat tracker in plain numpy.
 
 ``dp_beat_track(onset_env, fps)`` works on any onset-strength envelope at any
-frame rate (audio onsets at 50 fps, motion onsets at 60 fps):
+frame rate -- audio onsets at 50 fps (``dancesynth.music``) and motion onsets at
+60 fps (``dancesynth.motion.beats``) -- so it sits below both layers:
 
 1. ``estimate_tempo``: the global tempo is the lag that maximises the mean
    autocorrelation of 8 s windows of the envelope plus a log-normal prior on the
