@@ -15,6 +15,8 @@ SHARED = Path(os.environ.get("DANCESYNTH_SHARED", REPO.parent / "shared"))
 SHARED_MOCAP = SHARED / "data" / "mocap"
 
 os.environ.setdefault("NUMBA_CACHE_DIR", str(REPO / ".cache" / "numba"))
+# Graphs and user databases built by tests go to the repository's cache, not the user's.
+os.environ.setdefault("DANCESYNTH_CACHE", str(REPO / ".cache" / "dancesynth"))
 
 
 def shared_mocap_files():

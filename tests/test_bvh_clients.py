@@ -46,14 +46,43 @@ def _written_clip(path, tmp_path):
     return clip, out, positions
 
 
+needs_blender = pytest.mark.skipif(BLENDER is None, reason="blender is not on PATH")
+needs_three = [pytest.mark.skipif(NODE is None, reason="node is not on PATH"),
+               pytest.mark.skipif(not THREE.is_file(), reason="three.js not installed: run `npm ci` in tests/clients")]
+
+
+@pytest.fixture(scope="module")
+def dance_file(tmp_path_factory):
+    """A dance made by the product from a bundled song, written as BVH."""
+    from conftest import BUNDLED_MUSIC
+    from dancesynth.api import dance
+
+    clip = dance(BUNDLED_MUSIC / "sorohanro_-_solo-trumpet-06.ogg")
+    out = tmp_path_factory.mktemp("dance") / "trumpet.bvh"
+    write_bvh(out, clip)
+    written = read_bvh(out)
+    _, positions = clip_fk(written)
+    return written, out, positions
+
+
 @pytest.mark.blender
-@pytest.mark.skipif(BLENDER is None, reason="blender is not on PATH")
+@needs_blender
 @pytest.mark.parametrize("path", FIXTURE_FILES)
 def test_blender_imports_written_bvh(path, tmp_path):
-    clip, bvh_file, positions = _written_clip(path, tmp_path)
+    check_blender(*_written_clip(path, tmp_path), tmp_path, SAMPLE)
+
+
+@pytest.mark.blender
+@needs_blender
+def test_blender_imports_a_dance(dance_file, tmp_path):
+    clip = dance_file[0]
+    check_blender(*dance_file, tmp_path, (0, clip.n_frames // 2, clip.n_frames - 1))
+
+
+def check_blender(clip, bvh_file, positions, tmp_path, sample):
     report_file = tmp_path / "blender.json"
     cmd = [BLENDER, "-b", "--factory-startup", "--python", str(CLIENTS / "blender_import.py"), "--",
-           str(bvh_file), str(clip.n_frames), str(report_file), ",".join(map(str, SAMPLE))]
+           str(bvh_file), str(clip.n_frames), str(report_file), ",".join(map(str, sample))]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=TIMEOUT_S, check=False)
     assert report_file.is_file(), f"Blender wrote no report:\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}"
     report = json.loads(report_file.read_text())
@@ -63,7 +92,7 @@ def test_blender_imports_written_bvh(path, tmp_path):
     assert report["bones"] == list(clip.skeleton.names)
     # Blender's importer turns BVH's Y-up, -Z-forward world into its Z-up world:
     # (x, y, z) -> (x, -z, y); global_scale=1 keeps metres.
-    for f in SAMPLE:
+    for f in sample:
         got = report["head_positions"][str(f)]
         ours = positions[f]
         blender = np.array([got[name] for name in clip.skeleton.names])
@@ -72,12 +101,22 @@ def test_blender_imports_written_bvh(path, tmp_path):
         assert err < TOLERANCE_M, f"frame {f}: joints differ by up to {err:.2e} m"
 
 
-@pytest.mark.skipif(NODE is None, reason="node is not on PATH")
-@pytest.mark.skipif(not THREE.is_file(), reason="three.js not installed: run `npm ci` in tests/clients")
 @pytest.mark.parametrize("path", FIXTURE_FILES)
+@needs_three[0]
+@needs_three[1]
 def test_threejs_imports_written_bvh(path, tmp_path):
-    clip, bvh_file, positions = _written_clip(path, tmp_path)
-    proc = subprocess.run([NODE, str(CLIENTS / "three_import.mjs"), str(bvh_file), ",".join(map(str, SAMPLE))],
+    check_three(*_written_clip(path, tmp_path), SAMPLE)
+
+
+@needs_three[0]
+@needs_three[1]
+def test_threejs_imports_a_dance(dance_file):
+    clip = dance_file[0]
+    check_three(*dance_file, (0, clip.n_frames // 2, clip.n_frames - 1))
+
+
+def check_three(clip, bvh_file, positions, sample):
+    proc = subprocess.run([NODE, str(CLIENTS / "three_import.mjs"), str(bvh_file), ",".join(map(str, sample))],
                           capture_output=True, text=True, timeout=TIMEOUT_S, check=False, cwd=CLIENTS)
     assert proc.returncode == 0, proc.stderr[-2000:]
     report = json.loads(proc.stdout)
@@ -89,7 +128,7 @@ def test_threejs_imports_written_bvh(path, tmp_path):
     assert report["track_count"] == 2 * sk.n_joints
     assert report["duration"] == pytest.approx(clip.duration_s, abs=1e-5)
     assert report["frame_time"] == pytest.approx(1.0 / clip.fps, abs=1e-6)
-    for f in SAMPLE:
+    for f in sample:
         got = report["positions"][str(f)]
         three = np.array([got[name] for name in sk.names])
         err = np.abs(three - positions[f]).max()
