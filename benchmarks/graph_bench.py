@@ -182,16 +182,10 @@ def main() -> int:
         engine = GraphEngine(style, graph)
         music = song_features()[: 1 if args.quick else 3]
         fig4, fit_x, fit_y = [], [], []
-        for seg_s in SEGMENTS_S:
-            t = segment_timings(engine, music, seg_s)
-            fig4.append({"segment_s": seg_s, "segments": len(t), "beats_mean": round(float(t[:, 2].mean()), 1),
-                         "search_ms_median": round(float(np.median(t[:, 0]) * 1e3), 3),
-                         "search_ms_max": round(float(t[:, 0].max() * 1e3), 3),
-                         "render_ms_median": round(float(np.median(t[:, 1]) * 1e3), 2)})
-            fit_x += list(graph.mean_in_degree * graph.n_nodes * t[:, 2])
-            fit_y += list(t[:, 0])
-        for label, excerpt in (("global 30 s", 30.0), ("global song", None)):
-            t = global_timings(engine, music, excerpt)
+        runs = [(seg_s, segment_timings(engine, music, seg_s)) for seg_s in SEGMENTS_S]
+        runs += [(label, global_timings(engine, music, excerpt))
+                 for label, excerpt in (("global 30 s", 30.0), ("global song", None))]
+        for label, t in runs:
             fig4.append({"segment_s": label, "segments": len(t), "beats_mean": round(float(t[:, 2].mean()), 1),
                          "search_ms_median": round(float(np.median(t[:, 0]) * 1e3), 3),
                          "search_ms_max": round(float(t[:, 0].max() * 1e3), 3),

@@ -39,6 +39,8 @@ class GraphConfig:
     neighbour_s: float = 1 / 30  # eq. (1)'s "t-1, t+1": neighbouring frames at 30 fps, the rate motion
                                  # graphs are usually built at (the paper does not state its rate)
     thr: float = 1.5            # eq. (2): floor of the bi-directional weight, must be > 1
+    max_jumps_per_beat: int = 32  # keep a beat's most similar partners only (mutual nearest
+                                  # neighbours; 0 = no limit, the paper)
     min_jump_beats: int = 4     # no jump between beats of one clip closer than this (0 = paper);
                                 # stops the search looping on one beat
     close_dead_ends: bool = True  # if no start node can go on forever, give every end node
@@ -223,18 +225,29 @@ def build_graph(style: Style, config: GraphConfig = GraphConfig()) -> MetaMotion
     rd_rows = _SimilarityRows(style, frames, clip, config)
     src_l, dst_l, rd_l = [], [], []
     block = rd_rows.block_rows()
+    m = config.max_jumps_per_beat
     for s in range(0, n, block):
         rows = np.arange(s, min(s + block, n))
         rd = rd_rows(rows)
+        if 0 < m < n:
+            # Keep each beat's m most similar candidates (then only mutual pairs, below).
+            cut = np.partition(rd, m - 1, axis=1)[:, m - 1:m]
+            rd[rd > cut] = np.inf
         r, c = np.nonzero(rd < config.ths)
         src_l.append(rows[r])
         dst_l.append(c)
         rd_l.append(rd[r, c])
-    src, dst = np.concatenate(src_l), np.concatenate(dst_l)
+    src, dst, rd_e = np.concatenate(src_l), np.concatenate(dst_l), np.concatenate(rd_l)
+    if 0 < m < n:
+        # An edge is bi-directional: keep it when each end is among the other's m best.
+        # This also stops one beat with a large local motion (a small eq. (1) ratio to
+        # everything) from joining the whole graph.
+        mutual = np.isin(dst * n + src, src * n + dst)
+        src, dst, rd_e = src[mutual], dst[mutual], rd_e[mutual]
 
     graph = MetaMotionGraph(
         style=style.name, fps=style.fps, node_frame=frames, node_clip=clip, next_node=next_node,
-        prev_node=prev_node, w1=w1, w1_z=w1_z, bi_src=src, bi_dst=dst, bi_rd=np.concatenate(rd_l).astype(np.float64),
+        prev_node=prev_node, w1=w1, w1_z=w1_z, bi_src=src, bi_dst=dst, bi_rd=rd_e.astype(np.float64),
         capacity=np.zeros(n), init_nodes=np.flatnonzero(np.r_[True, clip[1:] != clip[:-1]]), thr=config.thr)
     derive_steps(graph)
 

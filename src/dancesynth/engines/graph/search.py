@@ -66,44 +66,57 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     intensity_z = np.asarray(intensity_z, dtype=np.float64)
     durations_s = np.asarray(durations_s, dtype=np.float64)
     n, k_steps = graph.n_nodes, len(intensity_z)
-    cost = np.full(n, np.inf)
-    cost[np.asarray(start_nodes)] = 0.0
-    back = np.full((k_steps, n), -1, dtype=np.int32)
-
+    costs = np.full((k_steps + 1, n), np.inf)
+    costs[0, np.asarray(start_nodes)] = 0.0
     src, via = graph.step_src, graph.step_via
-    w2, jump, rho = graph.step_w2, graph.step_jump, graph.step_rho
     starts, dest = graph.group_starts, graph.group_nodes
-    group_of_step = np.repeat(np.arange(len(starts)), np.diff(np.r_[starts, len(src)]))
-    w1z_via = graph.w1_z[via]
-    arrive = 0.0 if node_penalty is None else np.asarray(node_penalty, dtype=np.float64)[graph.step_dst]
-    prev_d = prev_duration_s
-    for k in range(k_steps):
-        factor = np.where(jump, _rate_factor(rho, prev_d, durations_s[k]) * w2, 1.0)
-        step_cost = cost[src] + factor * np.abs(w1z_via - intensity_z[k]) + arrive
-        best = np.minimum.reduceat(step_cost, starts) if len(starts) else np.zeros(0)
-        # First step per destination reaching the minimum = the argmin of eq. (8).
-        hit = np.flatnonzero(step_cost <= best[group_of_step])
-        first = hit[np.r_[True, group_of_step[hit[1:]] != group_of_step[hit[:-1]]]] if hit.size else hit
-        cost = np.full(n, np.inf)
-        cost[dest] = best
-        back[k, dest[group_of_step[first]]] = first
-        prev_d = durations_s[k]
+    jumps = np.flatnonzero(graph.step_jump)
+    rho_j, w2_j = graph.step_rho[jumps], graph.step_w2[jumps]
+    arrive = None if node_penalty is None else np.asarray(node_penalty, dtype=np.float64)[graph.step_dst]
+    prev = np.r_[np.nan if prev_duration_s is None else prev_duration_s, durations_s[:-1]]
 
-    ok = (graph.capacity >= thc) & np.isfinite(cost)
+    def step_terms(k: int, sel=slice(None)):
+        """Eq. (4)-(6) edge costs of step k (for the steps ``sel``)."""
+        term = np.abs(graph.w1_z - intensity_z[k])[via[sel]]
+        is_jump = graph.step_jump[sel]
+        if is_jump.any():
+            j = np.searchsorted(jumps, np.arange(len(src))[sel][is_jump])
+            term[is_jump] *= _rate_factor(rho_j[j], prev[k], durations_s[k]) * w2_j[j]
+        if arrive is not None:
+            term += arrive[sel]
+        return term
+
+    for k in range(k_steps):
+        # Eq. (8) for every destination at once: the steps are sorted by destination.
+        term = np.abs(graph.w1_z - intensity_z[k])[via]
+        term[jumps] *= _rate_factor(rho_j, prev[k], durations_s[k]) * w2_j
+        if arrive is not None:
+            term += arrive
+        term += costs[k][src]
+        if len(starts):
+            costs[k + 1][dest] = np.minimum.reduceat(term, starts)
+
+    ok = (graph.capacity >= thc) & np.isfinite(costs[k_steps])
     if not ok.any():
         raise SynthesisError(
             f"no path through the '{graph.style}' graph for {k_steps} beats ending with capacity "
             f">= {thc}: the style's database is too small for this music; try another style")
-    end = int(np.flatnonzero(ok)[np.argmin(cost[ok])])
-    total = float(cost[end])
+    end = int(np.flatnonzero(ok)[np.argmin(costs[k_steps][ok])])
+    # Backtrack: re-evaluate only the steps into the chosen node (the first minimum wins,
+    # as it would in a forward argmin).
+    group_of_node = np.full(n, -1)
+    group_of_node[dest] = np.arange(len(dest))
+    ends = np.r_[starts[1:], len(src)]
     nodes = np.empty(k_steps + 1, dtype=np.int64)
     vias = np.empty(k_steps, dtype=np.int64)
-    jumps = np.empty(k_steps, dtype=bool)
+    jumped = np.empty(k_steps, dtype=bool)
     nodes[k_steps] = end
     for k in range(k_steps - 1, -1, -1):
-        e = back[k, nodes[k + 1]]
-        nodes[k], vias[k], jumps[k] = src[e], via[e], jump[e]
-    return Path(nodes, vias, jumps, total)
+        g = group_of_node[nodes[k + 1]]
+        sel = slice(starts[g], ends[g])
+        e = starts[g] + int(np.argmin(costs[k][src[sel]] + step_terms(k, sel)))
+        nodes[k], vias[k], jumped[k] = src[e], via[e], graph.step_jump[e]
+    return Path(nodes, vias, jumped, float(costs[k_steps][end]))
 
 
 def path_cost(graph: MetaMotionGraph, path: Path, intensity_z, durations_s, prev_duration_s=None) -> float:
