@@ -89,7 +89,7 @@ def dance(song, output, style, engine, segment_seconds, fps, seed, database, max
     note = " (no clear beat: dancing at a steady default tempo)" if s["default_tempo"] else ""
     click.echo(f"song      {song}  {s['duration_s']:.1f} s")
     click.echo(f"tempo     {s['tempo_bpm']:.1f} bpm, {s['beats']} beats{note}")
-    click.echo(f"style     {s['style']}" + (f" (dancing double time)" if s["subdivide"] > 1 else ""))
+    click.echo(f"style     {s['style']}" + (" (dancing double time)" if s["subdivide"] > 1 else ""))
     click.echo(f"engine    {s['engine']}: {s['segments']} segment(s) of {s['segment_s']:g} s, "
                f"{s['transitions']} transitions, median {s['step_s_median'] * 1e3:.1f} ms per segment")
     click.echo(f"time      music {tm['music_s']:.2f} s, database {tm['database_s']:.2f} s, graph "

@@ -89,8 +89,30 @@ def heading(q, forward=(0.0, 0.0, 1.0)) -> np.ndarray:
 
 
 def from_euler(angles_deg, order: str) -> np.ndarray:
-    """Quaternions from BVH Euler angles (degrees) in intrinsic channel ``order``, e.g. ``"ZXY"``."""
-    return _q(Rotation.from_euler(order.upper(), np.asarray(angles_deg, dtype=np.float64), degrees=True))
+    """Quaternions from BVH Euler angles (degrees) in intrinsic channel ``order``, e.g. ``"ZXY"``.
+
+    Composes the per-axis quaternions directly: the same numbers (sign included) as
+    SciPy's ``from_euler``, several times faster on the ~10^5 joint-frames of a file.
+    """
+    angles = np.radians(np.asarray(angles_deg, dtype=np.float64)) / 2.0
+    if len(order) == 1 and angles.ndim <= 1:  # one axis: scalars or a list of angles, as in SciPy
+        angles = angles[..., None]
+    q = None
+    for k, axis in enumerate(order.upper()):
+        a = np.zeros(angles.shape[:-1] + (4,))
+        a[..., "XYZ".index(axis)] = np.sin(angles[..., k])
+        a[..., 3] = np.cos(angles[..., k])
+        q = a if q is None else _hamilton(q, a)
+    return q
+
+
+def _hamilton(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    ax, ay, az, aw = np.moveaxis(a, -1, 0)
+    bx, by, bz, bw = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw,
+                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)
 
 
 def to_euler(q, order: str) -> np.ndarray:

@@ -30,50 +30,24 @@ from __future__ import annotations
 import io
 import math
 import re
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .. import kinematics
 from .. import rotations as rot
 from ..errors import InputError
 from ..types import POSITION_CHANNELS, ROTATION_CHANNELS, MotionClip, Skeleton
-from .files import atomic_output
+from .bvh_writer import format_bvh, write_bvh
+from .skeleton_units import UNITS, detect_units, is_tpose_first_frame, resolve_units, standing_height
 
 __all__ = ["UNITS", "read_bvh", "parse_bvh", "write_bvh", "format_bvh", "detect_units", "standing_height",
            "is_tpose_first_frame"]
-
-#: Known unit systems of BVH files, as metres per file unit. "asf" is CMU's ASF length
-#: unit; "daz128" that of the rescaled CMU salsa files (the Daz-friendly release is in
-#: centimetres, divided by 128 there: 1 unit = 1.28 m).
-UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "asf": 0.056444, "daz128": 1.28}
-#: Unit names also accepted by ``units=``.
-_UNIT_ALIASES = {"metres": "m", "meters": "m", "metre": "m", "meter": "m", "centimetres": "cm",
-                 "centimeters": "cm", "millimetres": "mm", "millimeters": "mm", "inches": "in",
-                 "inch": "in", "daz/128": "daz128"}
-#: Standing height (m) that ``detect_units`` aims for.
-TYPICAL_HEIGHT_M = 1.7
 
 _CHANNEL_NAMES = {c.lower(): c for c in POSITION_CHANNELS + ROTATION_CHANNELS}
 _KEYWORDS = {"HIERARCHY", "ROOT", "JOINT", "END", "OFFSET", "CHANNELS", "MOTION", "{", "}"}
 _TOKEN = re.compile(r"[{}]|[^\s{}]+")
 _MOTION_LINE = re.compile(r"^[ \t]*MOTION[ \t]*$", re.MULTILINE)
-
-# T-pose detection (see is_tpose_first_frame): frame 0 within this many degrees of the
-# rest pose at every joint, and its step to frame 1 this many times the median step
-# and the next step.
-_TPOSE_REST_DEG = 20.0
-_TPOSE_JUMP_RATIO = 8.0
-_TPOSE_ISOLATED_RATIO = 4.0
-# Units: a rest pose "stands" when its lowest point is this far below the root and
-# its highest this far above (fractions of the vertical extent).
-_UPRIGHT_BELOW, _UPRIGHT_ABOVE = 0.25, 0.2
-_VERTICAL_BONE = 0.8  # cosine to the vertical above which a bone counts at full length
-# Standing heights (file units) read as metres without further ado; see detect_units.
-_METRES_PLAUSIBLE = (1.25, 2.5)
-
 
 # --------------------------------------------------------------------------- reading
 
@@ -416,35 +390,6 @@ def _fps_from_frame_time(frame_time: float, text: str) -> float:
     return fps
 
 
-def _axis_quat(axis: int, angles_deg: np.ndarray) -> np.ndarray:
-    q = np.zeros(angles_deg.shape + (4,))
-    half = np.radians(angles_deg) / 2.0
-    q[..., axis] = np.sin(half)
-    q[..., 3] = np.cos(half)
-    return q
-
-
-def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    ax, ay, az, aw = np.moveaxis(a, -1, 0)
-    bx, by, bz, bw = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw,
-                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)
-
-
-def _euler_to_quat(angles_deg: np.ndarray, order: str) -> np.ndarray:
-    """Same result (sign included) as ``rotations.from_euler(angles, order)``, for any leading shape.
-
-    Composing the axis quaternions in numpy is several times faster than SciPy's
-    ``from_euler`` on the ~10^5 joint-frames of a long file.
-    """
-    q = _axis_quat("XYZ".index(order[0]), angles_deg[..., 0])
-    for k in range(1, len(order)):
-        q = _qmul(q, _axis_quat("XYZ".index(order[k]), angles_deg[..., k]))
-    return q
-
-
 def _build_clip(raw: _Raw, name: str, *, to_metres: bool, units, drop_tpose: bool) -> MotionClip:
     n_j = len(raw.names)
     offsets = np.array(raw.offsets, dtype=np.float64).reshape(n_j, 3)
@@ -480,7 +425,7 @@ def _build_clip(raw: _Raw, name: str, *, to_metres: bool, units, drop_tpose: boo
     for order, members in euler_groups.items():
         joints = [j for j, _ in members]
         cols = np.array([c for _, c in members])  # (joints, len(order))
-        local_rot[:, joints] = _euler_to_quat(values[:, cols], order)
+        local_rot[:, joints] = rot.from_euler(values[:, cols], order)
 
     offsets[0] = 0.0  # folded into root_pos
     if local_pos is not None:
@@ -493,7 +438,7 @@ def _build_clip(raw: _Raw, name: str, *, to_metres: bool, units, drop_tpose: boo
     if units is None:
         unit_name, scale = detect_units(skeleton, clip=clip)
     else:
-        unit_name, scale = _resolve_units(units, name)
+        unit_name, scale = resolve_units(units, name)
     if to_metres and scale != 1.0:
         clip = MotionClip(skeleton.scaled(scale), fps, root_pos * scale, local_rot,
                           None if local_pos is None else local_pos * scale)
@@ -509,250 +454,3 @@ def _build_clip(raw: _Raw, name: str, *, to_metres: bool, units, drop_tpose: boo
         "dropped_tpose": dropped,
     })
     return clip
-
-
-def _resolve_units(units, name: str) -> tuple[str, float]:
-    if isinstance(units, (int, float)) and not isinstance(units, bool):
-        if not (math.isfinite(units) and units > 0):
-            raise InputError(f"{name}: units={units!r}; give metres per file unit as a positive number")
-        for key, value in UNITS.items():
-            if math.isclose(value, units, rel_tol=1e-9):
-                return key, value
-        return f"{float(units):g} m", float(units)
-    if isinstance(units, str):
-        key = _UNIT_ALIASES.get(units.strip().lower(), units.strip().lower())
-        if key in UNITS:
-            return key, UNITS[key]
-    raise InputError(f"{name}: unknown units {units!r}; use one of {', '.join(UNITS)} or metres per unit as a number")
-
-
-# --------------------------------------------------------------------------- units
-
-
-def _rest_positions(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
-    """Rest-pose world positions of the joints (J, 3) and of the End Sites (E, 3)."""
-    n = skeleton.n_joints
-    pos = np.zeros((n, 3))
-    for j in range(1, n):
-        pos[j] = pos[skeleton.parents[j]] + skeleton.offsets[j]
-    ends = np.array([pos[j] + o for j, o in skeleton.end_sites.items()]).reshape(-1, 3)
-    return pos, ends
-
-
-def _straight_drop(skeleton: Skeleton, pos: np.ndarray, leaf_pos: np.ndarray, leaf_parent: int, sign: float) -> float:
-    """Vertical distance from the root to a point, with nearly vertical bones counted at full length.
-
-    CMU's ASF rest pose splays the legs about 20 degrees; counting such bones at
-    their length measures the standing leg instead of the splayed one.
-    """
-    total = 0.0
-    child_pos, j = leaf_pos, leaf_parent
-    while j >= 0:
-        bone = child_pos - pos[j]
-        length = float(np.linalg.norm(bone))
-        rise = sign * bone[1]
-        total += length if rise >= _VERTICAL_BONE * length else rise
-        child_pos, j = pos[j], int(skeleton.parents[j])
-    return total
-
-
-def standing_height(skeleton: Skeleton, clip: MotionClip | None = None) -> float:
-    """Standing height of a skeleton in its own length unit.
-
-    From the rest pose: the head-to-feet vertical extent of all joints and End
-    Sites, measured along the chains from the root to the lowest and to the highest
-    point (see ``_straight_drop``). Some rigs do not stand upright in their rest
-    pose (Character Creator exports keep every bone along its local Y axis, so the
-    legs point up); for those, when ``clip`` is given, the median vertical extent of
-    the animated pose over a sample of frames is used instead.
-    """
-    pos, ends = _rest_positions(skeleton)
-    pts = np.vstack([pos, ends])
-    # The chain above a joint starts at its parent; above an End Site, at its own joint.
-    point_parent = [int(p) for p in skeleton.parents] + list(skeleton.end_sites)
-    low, high = int(np.argmin(pts[:, 1])), int(np.argmax(pts[:, 1]))
-    extent = float(pts[high, 1] - pts[low, 1])
-    upright = extent > 0 and -pts[low, 1] >= _UPRIGHT_BELOW * extent and pts[high, 1] >= _UPRIGHT_ABOVE * extent
-    if upright:
-        return (_straight_drop(skeleton, pos, pts[low], point_parent[low], -1.0)
-                + _straight_drop(skeleton, pos, pts[high], point_parent[high], 1.0))
-    if clip is None or clip.n_frames == 0:
-        return extent
-    frames = np.unique(np.linspace(0, clip.n_frames - 1, min(clip.n_frames, 32)).astype(int))
-    local_pos = None if clip.local_pos is None else clip.local_pos[frames]
-    g_rot, g_pos = kinematics.fk(clip.local_rot[frames], clip.root_pos[frames], skeleton.offsets,
-                                 skeleton.parents, local_pos)
-    y = g_pos[..., 1]
-    if skeleton.end_sites:
-        js = list(skeleton.end_sites)
-        end_off = np.array([skeleton.end_sites[j] for j in js])
-        y = np.concatenate([y, g_pos[:, js, 1] + rot.apply(g_rot[:, js], end_off)[..., 1]], axis=1)
-    return float(np.median(y.max(axis=1) - y.min(axis=1)))
-
-
-def detect_units(skeleton: Skeleton, *, clip: MotionClip | None = None,
-                 height: float | None = None) -> tuple[str, float]:
-    """Guess the length unit of ``skeleton`` as ``(name, metres_per_unit)``, a key and value of ``UNITS``.
-
-    The unit is the one that makes ``standing_height`` closest to 1.7 m in log
-    ratio, with one exception: metres win whenever they give a plausible human
-    (1.25 to 2.5 m). Metres is what dancesynth writes, and the Daz/128 unit of the
-    salsa files (1.28 m) is otherwise too close to metres for small dancers: CMU
-    subject 94 (1.33 m in its rest pose) would be read back 1.28 times too big.
-    The salsa skeleton itself measures 1.20 units (up to the eyes), below that
-    window, so it is still found. ``units=`` in ``read_bvh`` overrides any guess;
-    ``height`` (in file units) here skips the estimate.
-    """
-    h = standing_height(skeleton, clip) if height is None else float(height)
-    if not (math.isfinite(h) and h > 0):
-        return "m", 1.0
-    if _METRES_PLAUSIBLE[0] <= h <= _METRES_PLAUSIBLE[1]:
-        return "m", 1.0
-    return min(UNITS.items(), key=lambda kv: abs(math.log(h * kv[1] / TYPICAL_HEIGHT_M)))
-
-
-# --------------------------------------------------------------------------- T-pose
-
-
-def is_tpose_first_frame(clip: MotionClip) -> bool:
-    """Whether frame 0 is a converter's T-pose rather than motion.
-
-    Two signs, both needed: every non-root joint of frame 0 is within 20 degrees of
-    the rest pose, and the pose jumps from frame 0 to frame 1 far more than between
-    later frames (at least 8x the median step and 4x the next step). The second
-    test tells a lone T-pose frame from a clip that eases out of the rest pose over
-    several frames, such as the CMU salsa files.
-    """
-    if clip.n_frames < 3 or clip.skeleton.n_joints < 2:
-        return False
-    q = clip.local_rot[:, 1:]
-    if np.degrees(rot.angle(q[0], rot.IDENTITY)).max() > _TPOSE_REST_DEG:
-        return False
-    step = rot.angle(q[1:], q[:-1]).mean(axis=1)
-    first, typical = step[0], float(np.median(step[1:]))
-    return bool(first > _TPOSE_JUMP_RATIO * typical and first > _TPOSE_ISOLATED_RATIO * step[1])
-
-
-# --------------------------------------------------------------------------- writing
-
-
-def write_bvh(path, clip: MotionClip, *, precision: int = 6) -> None:
-    """Write ``clip`` to ``path`` as BVH (atomically: a failure leaves no partial file)."""
-    text = format_bvh(clip, precision=precision)
-    with atomic_output(path, "w", encoding="utf-8", newline="\n") as fh:
-        fh.write(text)
-
-
-def _full_order(rot_axes: str) -> str:
-    """A three-axis Euler order that starts with the axes a joint animates."""
-    return rot_axes + "".join(a for a in "ZXY" if a not in rot_axes)
-
-
-def format_bvh(clip: MotionClip, *, precision: int = 6) -> str:
-    """BVH text of ``clip``: the skeleton's hierarchy, names, channel layout and End Sites.
-
-    The root OFFSET is written as zero on the axes the root animates (its position
-    is all in the channels), so Blender and three.js place the root alike. Euler
-    angles come from ``rotations.to_euler`` and so vary continuously over frames.
-    Lengths are written in the clip's unit (metres for a clip read by ``read_bvh``).
-    A joint without rotation channels is written without them, losing its rotation.
-    """
-    if not isinstance(precision, int) or not 0 <= precision <= 17:
-        raise InputError(f"precision={precision!r}; give the number of decimals as an integer from 0 to 17")
-    sk = clip.skeleton
-    n_f = clip.n_frames
-    if n_f == 0:
-        raise InputError("cannot write a BVH file with no frames; the clip is empty")
-    channels = [tuple(c) for c in sk.channels]
-    for j, joint in enumerate(sk.names):
-        if not joint or any(ch.isspace() or ch in "{}" for ch in joint):
-            raise InputError(f"cannot write joint name {joint!r} to BVH: names must be one word without braces")
-        if sk.names.index(joint) != j:
-            raise InputError(f"cannot write a BVH file: joint name {joint!r} appears twice; rename one")
-        bad = [c for c in channels[j] if c not in POSITION_CHANNELS + ROTATION_CHANNELS]
-        if bad or len(set(channels[j])) != len(channels[j]):
-            raise InputError(f"cannot write joint {joint!r}: invalid channel list {channels[j]}")
-    if not any(channels):
-        raise InputError("cannot write a BVH file: no joint of the skeleton has channels")
-    arrays = {"root_pos": clip.root_pos, "local_rot": clip.local_rot}
-    if clip.local_pos is not None:
-        arrays["local_pos"] = clip.local_pos
-    for what, arr in arrays.items():
-        if not np.all(np.isfinite(arr)):
-            raise InputError(f"cannot write a BVH file: the clip's {what} holds NaN or infinite values")
-
-    # Root OFFSET: zero where channels carry the position, else the (constant) position.
-    root_offset = clip.root_pos[0].copy()
-    for c in channels[0]:
-        if c in POSITION_CHANNELS:
-            root_offset[POSITION_CHANNELS.index(c)] = 0.0
-
-    # Channel values, column by column, in file order.
-    euler: dict[int, np.ndarray] = {}
-    groups: dict[str, list[int]] = {}
-    for j, chans in enumerate(channels):
-        axes = "".join(c[0] for c in chans if c in ROTATION_CHANNELS)
-        if axes:
-            groups.setdefault(_full_order(axes), []).append(j)
-    for order, joints in groups.items():
-        with warnings.catch_warnings():
-            # At gimbal lock SciPy warns and picks one of the equivalent triples; fine here.
-            warnings.filterwarnings("ignore", message="Gimbal lock", category=UserWarning)
-            angles = rot.to_euler(clip.local_rot[:, joints], order)  # (F, k, 3), continuous along frames
-        for k, j in enumerate(joints):
-            euler[j] = angles[:, k]
-    # BVH lists channels in the order the HIERARCHY visits joints (depth first), which
-    # need not be our index order for a skeleton built in code.
-    children = [[] for _ in range(sk.n_joints)]
-    for j in range(1, sk.n_joints):
-        children[sk.parents[j]].append(j)
-    visit, stack = [], [0]
-    while stack:
-        j = stack.pop()
-        visit.append(j)
-        stack.extend(reversed(children[j]))
-
-    columns = []
-    for j in visit:
-        r = 0
-        for c in channels[j]:
-            if c in POSITION_CHANNELS:
-                axis = POSITION_CHANNELS.index(c)
-                if j == 0:
-                    columns.append(clip.root_pos[:, axis] - root_offset[axis])
-                elif clip.local_pos is not None:
-                    columns.append(clip.local_pos[:, j, axis] - sk.offsets[j, axis])
-                else:
-                    columns.append(np.zeros(n_f))
-            else:
-                columns.append(euler[j][:, r])
-                r += 1
-    values = np.stack(columns, axis=1) if columns else np.zeros((n_f, 0))
-
-    num = f"{{:.{precision}f}}".format
-    out = ["HIERARCHY"]
-
-    def emit(j: int, depth: int) -> None:
-        pad = "\t" * depth
-        out.append(f"{pad}{'ROOT' if j == 0 else 'JOINT'} {sk.names[j]}")
-        out.append(f"{pad}{{")
-        off = root_offset if j == 0 else sk.offsets[j]
-        out.append(f"{pad}\tOFFSET {num(off[0])} {num(off[1])} {num(off[2])}")
-        out.append(f"{pad}\tCHANNELS {len(channels[j])}" + "".join(" " + c for c in channels[j]))
-        for child in children[j]:
-            emit(child, depth + 1)
-        if j in sk.end_sites:
-            e = sk.end_sites[j]
-            out.append(f"{pad}\tEnd Site")
-            out.append(f"{pad}\t{{")
-            out.append(f"{pad}\t\tOFFSET {num(e[0])} {num(e[1])} {num(e[2])}")
-            out.append(f"{pad}\t}}")
-        out.append(f"{pad}}}")
-
-    emit(0, 0)
-    out.append("MOTION")
-    out.append(f"Frames: {n_f}")
-    out.append(f"Frame Time: {1.0 / clip.fps:.8f}")
-    row = " ".join([f"%.{precision}f"] * values.shape[1])
-    out.extend(row % tuple(v) for v in values.tolist())
-    return "\n".join(out) + "\n"
