@@ -96,7 +96,7 @@ def test_ten_minute_songs_never_run_out_of_path_on_any_style(bundled_db):
     for style in bundled_db.styles.values():
         tempo = style.natural_tempo_bpm
         clip = dance(music(600.0, tempo, seed=7), database=bundled_db, style=style.name, fps=5.0,
-                     render=EngineConfig(foot_lock=False, repeat_penalty=0.5))
+                     render=EngineConfig(foot_lock=False))
         assert clip.n_frames == int(600.0 * 5.0) + 1, style.name
 
 
@@ -141,3 +141,19 @@ def test_config_validation():
         DanceConfig(engine="magic")
     with pytest.raises(InputError, match="frame rate"):
         DanceConfig(fps=0)
+
+
+def test_jump_cost_trades_transitions_for_continuity(bundled_db):
+    song = music(40.0, 132.0, seed=5)
+    free = dance(song, database=bundled_db, style="salsa", render=EngineConfig(jump_cost=0.0))
+    costly = dance(song, database=bundled_db, style="salsa", render=EngineConfig(jump_cost=1.0))
+    assert costly.meta["summary"]["transitions"] < free.meta["summary"]["transitions"]
+
+
+def test_the_papers_exact_objective_still_dances(bundled_db):
+    from dancesynth.engines.graph.meta_graph import GraphConfig
+
+    clip = dance(music(30.0, 130.0), database=bundled_db, style="salsa", graph=GraphConfig.paper(),
+                 render=EngineConfig.paper())
+    assert clip.n_frames == int(30.0 * FPS) + 1
+    assert clip.meta["summary"]["graph_mean_in_degree"] < 2.0  # literal eq. (1) leaves few transitions

@@ -32,7 +32,7 @@ class DanceConfig:
     seed: int | None = None
     max_duration_s: float = 15 * 60.0
     graph: GraphConfig = field(default_factory=GraphConfig)
-    render: EngineConfig = field(default_factory=lambda: EngineConfig(repeat_penalty=0.5))
+    render: EngineConfig = field(default_factory=EngineConfig)
 
     def __post_init__(self):
         if self.engine not in ENGINES:

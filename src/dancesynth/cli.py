@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import click
@@ -62,8 +63,10 @@ def cli():
 @click.option("--database", type=click.Path(file_okay=False, path_type=Path),
               help="A database folder or a folder of BVH files (default: the bundled database).")
 @click.option("--max-minutes", type=float, default=15.0, show_default=True, help="Refuse longer songs.")
+@click.option("--paper", is_flag=True,
+              help="Xu et al.'s objective exactly: no repeat penalty, jump cost or jump limits, literal eq. (1).")
 @click.option("-q", "--quiet", is_flag=True, help="No summary and no progress bar.")
-def dance(song, output, style, engine, segment_seconds, fps, seed, database, max_minutes, quiet):
+def dance(song, output, style, engine, segment_seconds, fps, seed, database, max_minutes, paper, quiet):
     """Make a beat-synchronised dance for SONG (wav, ogg, flac, mp3, ...) and write it as BVH."""
     from .api import DanceConfig, dance as make_dance
     from .io.bvh import write_bvh
@@ -73,6 +76,11 @@ def dance(song, output, style, engine, segment_seconds, fps, seed, database, max
         raise InputError(f"output {output} must end in .bvh")
     config = DanceConfig(style=style, engine=engine, segment_s=segment_seconds, fps=fps, seed=seed,
                          max_duration_s=max_minutes * 60.0)
+    if paper:
+        from .engines.graph.engine import EngineConfig
+        from .engines.graph.meta_graph import GraphConfig
+
+        config = replace(config, graph=GraphConfig.paper(), render=EngineConfig.paper())
     progress = _Progress(enabled=not quiet and sys.stderr.isatty())
     t0 = time.perf_counter()
     try:

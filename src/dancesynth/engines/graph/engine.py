@@ -44,9 +44,15 @@ class MusicSegment:
 @dataclass(frozen=True)
 class EngineConfig:
     blend_s: float = 0.3              # inertialization time at a jump
-    repeat_penalty: float = 0.0       # cost of revisiting a recently danced beat (0 = paper)
+    repeat_penalty: float = 0.5       # cost of revisiting a recently danced beat (0 = paper)
     repeat_half_life_beats: float = 32.0
     foot_lock: bool = True            # hold planted feet still through blends (leg IK)
+    jump_cost: float = 0.25           # added to every jump (0 = paper): fewer, better-motivated jumps
+
+    @classmethod
+    def paper(cls) -> "EngineConfig":
+        """The objective of eq. (4)-(9) alone: no repeat penalty, no jump cost."""
+        return cls(repeat_penalty=0.0, jump_cost=0.0)
 
 
 @dataclass(frozen=True)
@@ -130,7 +136,8 @@ class GraphEngine:
         penalty = self.config.repeat_penalty * recent if self.config.repeat_penalty > 0 else None
         t0 = time.perf_counter()
         path = search(self.graph, standardise(inten, mean, std), np.diff(beats), start_nodes=start,
-                      prev_duration_s=state.prev_duration_s, thc=thc, node_penalty=penalty)
+                      prev_duration_s=state.prev_duration_s, thc=thc, node_penalty=penalty,
+                      jump_cost=self.config.jump_cost)
         decay = 0.5 ** (1.0 / self.config.repeat_half_life_beats)
         recent = recent * decay ** len(inten)
         np.add.at(recent, path.nodes[1:], decay ** np.arange(len(inten) - 1, -1, -1))

@@ -48,6 +48,11 @@ class GraphConfig:
     max_joint_speed_deg_s: float = 1500.0  # beat intervals where a limb turns faster than this
                                            # hold capture glitches (wrist flips) and are not played
 
+    @classmethod
+    def paper(cls) -> "GraphConfig":
+        """Eq. (1)-(3) as printed: literal neighbouring frames, no limits on jumps."""
+        return cls(neighbour_s=0.0, max_jumps_per_beat=0, min_jump_beats=0)
+
     def __post_init__(self):
         if not self.thr > 1.0:
             raise ValueError("THR must be larger than 1")
@@ -171,7 +176,7 @@ class _SimilarityRows:
         self.w = w[joints]
         lo = style.clip_starts[clip]
         hi = style.clip_starts[clip + 1] - 1
-        step = max(1, int(round(config.neighbour_s * style.fps)))
+        step = max(1, int(round(config.neighbour_s * style.fps)))  # 0 s: the adjacent frames
         before = _poses(style, np.clip(frames - step, lo, hi), joints)
         after = _poses(style, np.clip(frames + step, lo, hi), joints)
         self.local = _distance(before, after, self.w)

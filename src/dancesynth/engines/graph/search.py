@@ -54,7 +54,7 @@ def _rate_factor(rho: np.ndarray, prev_duration: float | None, duration: float) 
 
 def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndarray, *,
            start_nodes: np.ndarray, prev_duration_s: float | None = None, thc: float = np.inf,
-           node_penalty: np.ndarray | None = None) -> Path:
+           node_penalty: np.ndarray | None = None, jump_cost: float = 0.0) -> Path:
     """Best path for K beat intervals (eq. 7-9).
 
     ``intensity_z`` (K,) are the normalised music intensities, ``durations_s`` (K,)
@@ -62,6 +62,8 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     segment's last node, or InitS) and ends at a node with capacity >= ``thc``.
     ``node_penalty`` (N,), if given, is added whenever a step arrives at a node (the
     streaming engine uses it to discourage replaying recent beats; not in the paper).
+    ``jump_cost`` is added to every jump (0 in the paper, where a jump to a beat of
+    exactly the music's intensity is free).
     """
     intensity_z = np.asarray(intensity_z, dtype=np.float64)
     durations_s = np.asarray(durations_s, dtype=np.float64)
@@ -82,6 +84,7 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
         if is_jump.any():
             j = np.searchsorted(jumps, np.arange(len(src))[sel][is_jump])
             term[is_jump] *= _rate_factor(rho_j[j], prev[k], durations_s[k]) * w2_j[j]
+            term[is_jump] += jump_cost
         if arrive is not None:
             term += arrive[sel]
         return term
@@ -90,6 +93,7 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
         # Eq. (8) for every destination at once: the steps are sorted by destination.
         term = np.abs(graph.w1_z - intensity_z[k])[via]
         term[jumps] *= _rate_factor(rho_j, prev[k], durations_s[k]) * w2_j
+        term[jumps] += jump_cost
         if arrive is not None:
             term += arrive
         term += costs[k][src]
