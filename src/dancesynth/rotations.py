@@ -49,9 +49,15 @@ def exp(rotvec) -> np.ndarray:
 
 
 def angle(a, b) -> np.ndarray:
-    """Geodesic angle (radians) between rotations ``a`` and ``b``."""
-    d = np.abs(np.sum(np.asarray(a) * np.asarray(b), axis=-1))
-    return 2.0 * np.arccos(np.clip(d, 0.0, 1.0))
+    """Geodesic angle (radians) between rotations ``a`` and ``b``.
+
+    Computed as 4 atan2(|a - b|, |a + b|) (b on a's hemisphere), which stays accurate
+    for nearly equal rotations where 2 arccos(a . b) loses all precision.
+    """
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    b = np.where(np.sum(a * b, axis=-1, keepdims=True) < 0, -b, b)
+    return 4.0 * np.arctan2(np.linalg.norm(a - b, axis=-1), np.linalg.norm(a + b, axis=-1))
 
 
 def slerp(a, b, t) -> np.ndarray:

@@ -52,7 +52,7 @@ def pca_turn_envelope(features: np.ndarray, fps: float, *, window_s: float = 1.0
         # First right-singular vector = first principal axis of this window.
         _, _, vt = np.linalg.svd(x, full_matrices=False)
         v = np.gradient(x @ vt[0]) * fps
-        turns = np.flatnonzero(np.sign(v[1:]) * np.sign(v[:-1]) < 0)
+        turns = np.flatnonzero(np.signbit(v[1:]) != np.signbit(v[:-1]))  # (an exact 0 counts as +)
         if turns.size:
             speed = np.abs(v)
             before = ndimage.maximum_filter1d(speed, reach + 1, origin=reach // 2)

@@ -18,6 +18,7 @@ import fnmatch
 import hashlib
 import json
 import tomllib
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable
@@ -364,7 +365,7 @@ def load_database(folder: Path) -> MotionDatabase:
             raw = path.read_bytes()
             with np.load(path) as z:
                 arr = {k: z[k] for k in z.files}
-        except (OSError, ValueError, KeyError) as exc:
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
             raise ModelError(f"{path} is missing or corrupt ({exc}); rebuild the database") from None
         sk = _skeleton_from_json(meta["skeleton"])
         rot = np.repeat(arr["static_rot"][None], len(arr["root_pos"]), axis=0)

@@ -76,7 +76,10 @@ def foot_contacts(feet: np.ndarray, fps: float, *, height_tol_m: float = 0.05,
     speed = np.linalg.norm(np.gradient(horiz, axis=0), axis=-1).min(axis=2) * fps if n > 1 else np.zeros((n, 2))
     contact = (low < floor + height_tol_m) & (speed < speed_tol_m_s)
     if min_frames > 1 and n:
+        # Close short gaps, then drop short flickers; pad with the edge values so the
+        # first and last frames keep their state.
         st = np.ones((min_frames, 1), dtype=bool)
-        contact = ndimage.binary_closing(contact, structure=st)
-        contact = ndimage.binary_opening(contact, structure=st)
+        padded = np.pad(contact, ((min_frames, min_frames), (0, 0)), mode="edge")
+        padded = ndimage.binary_opening(ndimage.binary_closing(padded, structure=st), structure=st)
+        contact = padded[min_frames:-min_frames]
     return contact

@@ -7,6 +7,7 @@ graph format version, so a changed database or parameter rebuilds the graph.
 from __future__ import annotations
 
 import hashlib
+import zipfile
 from dataclasses import fields
 from pathlib import Path
 
@@ -36,7 +37,7 @@ def load_graph(style: Style, config: GraphConfig = GraphConfig(), *, use_cache: 
             for k in _SCALARS:
                 kwargs[k] = kwargs[k].item()
             return MetaMotionGraph(**kwargs), True
-        except (OSError, ValueError, KeyError, TypeError):
+        except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile):
             pass  # unreadable cache entry: rebuild below
     graph = build_graph(style, config)
     if use_cache and style.fingerprint:

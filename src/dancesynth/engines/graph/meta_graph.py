@@ -161,8 +161,7 @@ def _poses(style: Style, frames: np.ndarray, joints: np.ndarray) -> np.ndarray:
 
 def _distance(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Eq. (3) between paired poses: sum_m w_m * (geodesic angle)^2."""
-    dots = np.abs(np.sum(a * b, axis=-1))
-    return np.sum(w * (2.0 * np.arccos(np.minimum(dots, 1.0))) ** 2, axis=-1)
+    return np.sum(w * rot.angle(a, b) ** 2, axis=-1)
 
 
 class _SimilarityRows:
