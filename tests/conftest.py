@@ -11,7 +11,8 @@ REPO = Path(__file__).resolve().parents[1]
 PACKAGE_DATA = REPO / "src" / "dancesynth" / "data"
 BUNDLED_MUSIC = PACKAGE_DATA / "music"
 # The team's shared data folder sits beside the repository; CI machines have it too.
-SHARED = Path(os.environ.get("DANCESYNTH_SHARED", REPO.parent / "shared"))
+_CANDIDATES = [os.environ.get("DANCESYNTH_SHARED"), REPO.parent / "shared", "/work/shared"]
+SHARED = next((Path(c) for c in _CANDIDATES if c and (Path(c) / "data" / "mocap").is_dir()), REPO.parent / "shared")
 SHARED_MOCAP = SHARED / "data" / "mocap"
 
 os.environ.setdefault("NUMBA_CACHE_DIR", str(REPO / ".cache" / "numba"))

@@ -157,3 +157,33 @@ def test_the_papers_exact_objective_still_dances(bundled_db):
                  render=EngineConfig.paper())
     assert clip.n_frames == int(30.0 * FPS) + 1
     assert clip.meta["summary"]["graph_mean_in_degree"] < 2.0  # literal eq. (1) leaves few transitions
+
+
+def test_a_tiny_database_still_dances_a_long_song(tmp_path):
+    """One second-long clip: the graph closes its dead ends and the dancer keeps going."""
+    import shutil
+
+    from conftest import REPO
+    from dancesynth.motion.database import open_database
+
+    folder = tmp_path / "tiny" / "whirl"
+    folder.mkdir(parents=True)
+    shutil.copy(REPO / "tests" / "data" / "mocap" / "cmu_mb_fbx2bvh" / "55_01_cmu.bvh", folder)
+    db = open_database(tmp_path / "tiny")
+    clip = dance(music(60.0, 100.0), database=db)
+    assert clip.n_frames == int(60.0 * FPS) + 1
+    assert clip.meta["summary"]["graph_nodes"] < 10
+
+
+def test_a_database_of_too_short_clips_is_a_clear_error(tmp_path):
+    import shutil
+
+    from conftest import REPO
+    from dancesynth.errors import InputError
+    from dancesynth.motion.database import open_database
+
+    folder = tmp_path / "short" / "indian"
+    folder.mkdir(parents=True)
+    shutil.copy(REPO / "tests" / "data" / "mocap" / "cmu_max_cgspeed" / "94_01.bvh", folder)
+    with pytest.raises(InputError, match="motion beats"):
+        open_database(tmp_path / "short")

@@ -409,6 +409,11 @@ def open_database(path: Path | None = None, config: AnalysisConfig = AnalysisCon
         return load_database(path)
     sources = collect_sources(path)
     h = hashlib.blake2b(repr((FORMAT_VERSION, config)).encode(), digest_size=16)
+    # The analysis code is part of the key, so improving it re-analyses cached folders.
+    package = Path(__file__).resolve().parents[1]
+    for code in sorted([*package.joinpath("motion").glob("*.py"), package / "beat_tracking.py",
+                        *package.joinpath("io").glob("*.py")]):
+        h.update(code.read_bytes())
     for genre, p in sources:
         st = p.stat()
         h.update(f"{genre}|{p.resolve()}|{st.st_size}|{st.st_mtime_ns}".encode())

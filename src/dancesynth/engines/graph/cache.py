@@ -1,7 +1,8 @@
 """Build a style's meta motion graph once, keep it on disk, reload it in milliseconds.
 
-The cache key covers the style's content fingerprint, the graph parameters and the
-graph format version, so a changed database or parameter rebuilds the graph.
+The cache key covers the style's content fingerprint, the graph parameters, the graph
+format version and the graph builder's own source, so a changed database, parameter
+or algorithm rebuilds the graph.
 """
 
 from __future__ import annotations
@@ -15,14 +16,20 @@ import numpy as np
 
 from ...io.files import atomic_output
 from ...motion.database import Style, cache_dir
+from . import meta_graph
 from .meta_graph import GRAPH_FORMAT_VERSION, GraphConfig, MetaMotionGraph, build_graph
 
 _SCALARS = ("style", "fps", "thr", "n_forced")
 
 
+# The code that builds graphs is part of the key: editing it can never serve a stale graph.
+_BUILDER = hashlib.blake2b(Path(meta_graph.__file__).read_bytes(), digest_size=8).hexdigest()
+
+
 def graph_path(style: Style, config: GraphConfig, root: Path | None = None) -> Path:
-    key = hashlib.blake2b(f"{GRAPH_FORMAT_VERSION}|{style.name}|{style.fingerprint}|{config.key()}".encode(),
-                          digest_size=16).hexdigest()
+    key = hashlib.blake2b(
+        f"{GRAPH_FORMAT_VERSION}|{_BUILDER}|{style.name}|{style.fingerprint}|{config.key()}".encode(),
+        digest_size=16).hexdigest()
     return (root or cache_dir()) / "graphs" / f"{style.name}-{key}.npz"
 
 

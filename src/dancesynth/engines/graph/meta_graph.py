@@ -189,7 +189,7 @@ class _SimilarityRows:
         per_row = len(self.q) * self.q.shape[1] * 4 * 3
         return int(max(1, min(1024, budget_bytes // max(per_row, 1))))
 
-    def __call__(self, rows: np.ndarray) -> np.ndarray:
+    def __call__(self, rows: np.ndarray, *, allow_near: bool = False) -> np.ndarray:
         dots = np.abs(np.einsum("ajk,bjk->abj", self.q32[rows], self.q32))
         np.minimum(dots, 1.0, out=dots)
         ang = np.arccos(dots, out=dots)
@@ -197,7 +197,8 @@ class _SimilarityRows:
         d = (ang @ (4.0 * self.w).astype(np.float32)).astype(np.float64)
         rd = d / np.maximum(self.local[rows, None] + self.local[None, :], 1e-12)
         idx = np.arange(len(self.q))
-        near = (self.clip[rows, None] == self.clip[None, :]) & (np.abs(rows[:, None] - idx[None, :]) < self.min_gap)
+        gap = 1 if allow_near else self.min_gap
+        near = (self.clip[rows, None] == self.clip[None, :]) & (np.abs(rows[:, None] - idx[None, :]) < gap)
         rd[near] = np.inf
         return rd
 
@@ -260,7 +261,7 @@ def build_graph(style: Style, config: GraphConfig = GraphConfig()) -> MetaMotion
         # to its most similar beat that has a successor, so long songs still find a path.
         ends = np.flatnonzero(next_node < 0)
         if has.any() and len(ends):
-            rd = rd_rows(ends)[:, has]
+            rd = rd_rows(ends, allow_near=True)[:, has]
             best = np.flatnonzero(has)[np.argmin(rd, axis=1)]
             ok = np.isfinite(rd.min(axis=1))
             ends, best, best_rd = ends[ok], best[ok], rd.min(axis=1)[ok]
