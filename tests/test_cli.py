@@ -165,3 +165,17 @@ def test_a_user_database_of_bvh_files_is_built_and_used(tmp_path, out):
                            "--database", str(tmp_path / "mydb")], capture_output=True, text=True, env=env, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert out.exists()
+
+
+def test_graph_thresholds_are_checked(out):
+    assert_clean_failure(run("dance", TRUMPET, "-o", out, "--thr", "0.5"), out, "THR")
+
+
+def test_build_db_writes_a_database_that_dance_can_use(tmp_path, out):
+    db = tmp_path / "built"
+    proc = run("build-db", REPO / "tests" / "data" / "mocap", "-o", db)
+    assert proc.returncode == 0, proc.stderr
+    assert (db / "database.json").is_file()
+    proc = run("dance", TRUMPET, "-o", out, "--database", db, "--style", "perfume_mit")
+    assert proc.returncode == 0, proc.stderr
+    assert "perfume_mit" in proc.stdout and out.exists()

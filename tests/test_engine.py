@@ -187,3 +187,22 @@ def test_a_database_of_too_short_clips_is_a_clear_error(tmp_path):
     shutil.copy(REPO / "tests" / "data" / "mocap" / "cmu_max_cgspeed" / "94_01.bvh", folder)
     with pytest.raises(InputError, match="motion beats"):
         open_database(tmp_path / "short")
+
+
+def test_a_live_stream_of_unknown_length_never_runs_out_of_path(bundled_db):
+    """THC = infinity (the remaining music is unknown): every segment ends where the dance can go on."""
+    from dancesynth.engines.graph.cache import load_graph
+    from dancesynth.engines.graph.engine import GraphEngine, MusicSegment
+
+    for style in bundled_db.styles.values():
+        graph, _ = load_graph(style)
+        engine = GraphEngine(style, graph, EngineConfig(foot_lock=False), fps=5.0)
+        song = music(600.0, style.natural_tempo_bpm, seed=11)
+        grid = beat_grid(song)
+        state = engine.initial_state()
+        b = 0
+        while b < grid.n_intervals - 1:
+            e = min(b + 10, grid.n_intervals - 1)
+            state, frames = engine.step(state, MusicSegment(grid.times_s[b:e + 1], grid.intensity_db[b:e]))
+            assert np.isinf(graph.capacity[frames.path.nodes[-1]]), style.name
+            b = e

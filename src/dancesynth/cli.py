@@ -63,10 +63,12 @@ def cli():
 @click.option("--database", type=click.Path(file_okay=False, path_type=Path),
               help="A database folder or a folder of BVH files (default: the bundled database).")
 @click.option("--max-minutes", type=float, default=15.0, show_default=True, help="Refuse longer songs.")
+@click.option("--ths", type=float, default=None, help="Eq. (1) threshold for transitions (default 3.0).")
+@click.option("--thr", type=float, default=None, help="Eq. (2) floor of a transition's weight, > 1 (default 1.5).")
 @click.option("--paper", is_flag=True,
               help="Xu et al.'s objective exactly: no repeat penalty, jump cost or jump limits, literal eq. (1).")
 @click.option("-q", "--quiet", is_flag=True, help="No summary and no progress bar.")
-def dance(song, output, style, engine, segment_seconds, fps, seed, database, max_minutes, paper, quiet):
+def dance(song, output, style, engine, segment_seconds, fps, seed, database, max_minutes, ths, thr, paper, quiet):
     """Make a beat-synchronised dance for SONG (wav, ogg, flac, mp3, ...) and write it as BVH."""
     from .api import DanceConfig, dance as make_dance
     from .io.bvh import write_bvh
@@ -76,11 +78,17 @@ def dance(song, output, style, engine, segment_seconds, fps, seed, database, max
         raise InputError(f"output {output} must end in .bvh")
     config = DanceConfig(style=style, engine=engine, segment_s=segment_seconds, fps=fps, seed=seed,
                          max_duration_s=max_minutes * 60.0)
-    if paper:
-        from .engines.graph.engine import EngineConfig
-        from .engines.graph.meta_graph import GraphConfig
+    from .engines.graph.engine import EngineConfig
+    from .engines.graph.meta_graph import GraphConfig
 
+    if paper:
         config = replace(config, graph=GraphConfig.paper(), render=EngineConfig.paper())
+    if ths is not None or thr is not None:
+        try:
+            graph = replace(config.graph, **{k: v for k, v in (("ths", ths), ("thr", thr)) if v is not None})
+        except ValueError as exc:
+            raise InputError(f"{exc}: check --ths and --thr") from None
+        config = replace(config, graph=graph)
     progress = _Progress(enabled=not quiet and sys.stderr.isatty())
     t0 = time.perf_counter()
     try:
@@ -114,9 +122,12 @@ def styles(database):
     from .api import list_styles
 
     rows = list_styles(database)
-    click.echo(f"{'style':<22}{'genre':<10}{'tempo (bpm)':>14}{'clips':>7}{'minutes':>9}{'beats':>7}{'joints':>8}")
+    ws = max(len("style"), *(len(r["name"]) for r in rows)) + 2
+    wg = max(len("genre"), *(len(r["genre"]) for r in rows)) + 2
+    click.echo(f"{'style':<{ws}}{'genre':<{wg}}{'tempo (bpm)':>12}{'clips':>7}{'minutes':>9}{'beats':>7}{'joints':>8}")
     for r in rows:
-        click.echo(f"{r['name']:<22}{r['genre']:<10}{r['tempo_min_bpm']:>7.0f}-{r['tempo_max_bpm']:<6.0f}"
+        tempo = f"{r['tempo_min_bpm']:.0f}-{r['tempo_max_bpm']:.0f}"
+        click.echo(f"{r['name']:<{ws}}{r['genre']:<{wg}}{tempo:>12}"
                    f"{r['clips']:>7}{r['minutes']:>9.1f}{r['beats']:>7}{r['joints']:>8}")
 
 
@@ -124,13 +135,17 @@ def styles(database):
 @click.argument("source", type=click.Path(file_okay=False, path_type=Path))
 @click.option("-o", "--output", type=click.Path(file_okay=False, path_type=Path), required=True,
               help="Folder to write the database to.")
-def build_db(source, output):
+@click.option("--beats", type=click.Choice(["pca", "kinematic"]), default="pca", show_default=True,
+              help="Motion beats by short-term PCA (Xu et al.) or by speed minima.")
+@click.option("--manifest", type=click.Path(dir_okay=False, path_type=Path),
+              help="A genres.toml mapping genres to file patterns (default: SOURCE/genres.toml or sub-folders).")
+def build_db(source, output, beats, manifest):
     """Analyse a folder of BVH files (one sub-folder per genre, or a genres.toml) into a database."""
-    from .motion.database import build_database, collect_sources, save_database
+    from .motion.database import AnalysisConfig, build_database, collect_sources, save_database
 
-    sources = collect_sources(source)
+    sources = collect_sources(source, manifest)
     with click.progressbar(length=len(sources), label="analysing", file=sys.stderr) as bar:
-        db = build_database(sources, progress=lambda _: bar.update(1))
+        db = build_database(sources, AnalysisConfig(beat_method=beats), progress=lambda _: bar.update(1))
     db.source = str(source)
     save_database(db, output)
     click.echo(f"wrote {output}: {len(db.styles)} styles from {len(sources)} files")
