@@ -3,7 +3,7 @@
 The tracker sits behind one function, ``track_beats(..., tracker="dp")``, so
 that trackers can be measured and swapped without touching callers:
 
-- ``"dp"`` (default): Ellis' dynamic programming in numpy (``tracking.dp_beat_track``).
+- ``"dp"`` (default): Ellis' dynamic programming in numpy (``dancesynth.beat_tracking.dp_beat_track``).
 - ``"librosa"``: the same algorithm as librosa implements it, for comparison. Its
   tempo is rounded to whole frames; otherwise it gives the same beats.
 
@@ -30,9 +30,9 @@ from typing import Callable
 import numpy as np
 
 from .. import timebase
+from ..beat_tracking import dp_beat_track
 from ..errors import InputError
 from .onset import ANALYSIS_SR, HOP_LENGTH, onset_envelope
-from ..beat_tracking import dp_beat_track
 
 # Chance level of the beat contrast (see ``beat_confidence``): on noise, where the
 # tracker can only pick random peaks, the contrast stayed below
@@ -59,7 +59,7 @@ SILENCE_BELOW_LOUD_DB = 50.0
 
 
 def _track_dp(onset_env: np.ndarray, sr: int, hop_length: int) -> np.ndarray:
-    """Ellis' dynamic-programming tracker in numpy (``tracking.dp_beat_track``), untrimmed."""
+    """Ellis' dynamic-programming tracker in numpy (``dancesynth.beat_tracking.dp_beat_track``), untrimmed."""
     frames, _ = dp_beat_track(onset_env, sr / hop_length)
     return frames
 
