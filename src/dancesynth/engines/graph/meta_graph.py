@@ -145,9 +145,12 @@ def rotation_glitches(style: Style, limit_deg_s: float) -> np.ndarray:
     for j in range(sk.n_joints - 1, 0, -1):
         subtree[sk.parents[j]] += subtree[j]
     joints = np.flatnonzero(subtree > 0.03)  # ignore finger tips and zero-length helpers
-    q = style.local_rot[:, joints].astype(np.float64)
-    speed = np.degrees(rot.angle(q[1:], q[:-1])).max(axis=1) * style.fps
-    return speed > limit_deg_s
+    limit_rad = np.radians(limit_deg_s) / style.fps
+    out = np.zeros(max(style.n_frames - 1, 0), dtype=bool)
+    for a in range(0, len(out), 8192):  # in blocks: a big database need not sit in memory twice
+        q = style.local_rot[a:a + 8193, joints].astype(np.float64)
+        out[a:a + len(q) - 1] = rot.angle(q[1:], q[:-1]).max(axis=1) > limit_rad
+    return out
 
 
 def _poses(style: Style, frames: np.ndarray, joints: np.ndarray) -> np.ndarray:

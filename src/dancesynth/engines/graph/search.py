@@ -45,7 +45,7 @@ class Path:
 
 def _rate_factor(rho: np.ndarray, prev_duration: float | None, duration: float) -> np.ndarray:
     """Eq. (6): s = max(r1/r2, r2/r1) with r1/r2 = rho * duration / prev_duration."""
-    if prev_duration is None or not prev_duration > 0:
+    if prev_duration is None or not prev_duration > 0:  # also NaN: no previous interval
         return np.ones_like(rho)
     x = rho * (duration / prev_duration)
     s = np.maximum(x, 1.0 / x)
@@ -70,35 +70,18 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     n, k_steps = graph.n_nodes, len(intensity_z)
     costs = np.full((k_steps + 1, n), np.inf)
     costs[0, np.asarray(start_nodes)] = 0.0
-    src, via = graph.step_src, graph.step_via
-    starts, dest = graph.group_starts, graph.group_nodes
-    jumps = np.flatnonzero(graph.step_jump)
-    rho_j, w2_j = graph.step_rho[jumps], graph.step_w2[jumps]
-    arrive = None if node_penalty is None else np.asarray(node_penalty, dtype=np.float64)[graph.step_dst]
+    steps = _Steps(graph, node_penalty, jump_cost)
     prev = np.r_[np.nan if prev_duration_s is None else prev_duration_s, durations_s[:-1]]
 
-    def step_terms(k: int, sel=slice(None)):
-        """Eq. (4)-(6) edge costs of step k (for the steps ``sel``)."""
-        term = np.abs(graph.w1_z - intensity_z[k])[via[sel]]
-        is_jump = graph.step_jump[sel]
-        if is_jump.any():
-            j = np.searchsorted(jumps, np.arange(len(src))[sel][is_jump])
-            term[is_jump] *= _rate_factor(rho_j[j], prev[k], durations_s[k]) * w2_j[j]
-            term[is_jump] += jump_cost
-        if arrive is not None:
-            term += arrive[sel]
-        return term
-
     for k in range(k_steps):
-        # Eq. (8) for every destination at once: the steps are sorted by destination.
-        term = np.abs(graph.w1_z - intensity_z[k])[via]
-        term[jumps] *= _rate_factor(rho_j, prev[k], durations_s[k]) * w2_j
-        term[jumps] += jump_cost
-        if arrive is not None:
-            term += arrive
-        term += costs[k][src]
-        if len(starts):
-            costs[k + 1][dest] = np.minimum.reduceat(term, starts)
+        # Eq. (8) for every destination at once. Mono steps have one destination each;
+        # jumps are sorted by destination, so a reduceat takes each destination's best.
+        dev = np.abs(graph.w1_z - intensity_z[k])
+        row = costs[k + 1]
+        row[steps.m_dst] = steps.mono(costs[k], dev)
+        if steps.j_nodes.size:
+            best = np.minimum.reduceat(steps.jump(costs[k], dev, prev[k], durations_s[k]), steps.j_starts)
+            row[steps.j_nodes] = np.minimum(row[steps.j_nodes], best)
 
     ok = (graph.capacity >= thc) & np.isfinite(costs[k_steps])
     if not ok.any():
@@ -106,21 +89,64 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
             f"no path through the '{graph.style}' graph for {k_steps} beats ending with capacity "
             f">= {thc}: the style's database is too small for this music; try another style")
     end = int(np.flatnonzero(ok)[np.argmin(costs[k_steps][ok])])
-    # Backtrack: re-evaluate only the steps into the chosen node (the first minimum wins,
-    # as it would in a forward argmin).
-    group_of_node = np.full(n, -1)
-    group_of_node[dest] = np.arange(len(dest))
-    ends = np.r_[starts[1:], len(src)]
+    # Backtrack: re-evaluate only the steps into each chosen node.
     nodes = np.empty(k_steps + 1, dtype=np.int64)
     vias = np.empty(k_steps, dtype=np.int64)
     jumped = np.empty(k_steps, dtype=bool)
     nodes[k_steps] = end
     for k in range(k_steps - 1, -1, -1):
-        g = group_of_node[nodes[k + 1]]
-        sel = slice(starts[g], ends[g])
-        e = starts[g] + int(np.argmin(costs[k][src[sel]] + step_terms(k, sel)))
-        nodes[k], vias[k], jumped[k] = src[e], via[e], graph.step_jump[e]
+        dev = np.abs(graph.w1_z - intensity_z[k])
+        v = nodes[k + 1]
+        m_sel = steps.mono_into[v:v + 1] if steps.mono_into[v] >= 0 else np.zeros(0, dtype=np.int64)
+        j_sel = np.arange(steps.j_first[v], steps.j_last[v])
+        cand = np.r_[steps.mono(costs[k], dev, m_sel), steps.jump(costs[k], dev, prev[k], durations_s[k], j_sel)]
+        i = int(np.argmin(cand))
+        if i < len(m_sel):
+            nodes[k] = vias[k] = steps.m_src[m_sel[i]]
+            jumped[k] = False
+        else:
+            e = j_sel[i - len(m_sel)]
+            nodes[k], vias[k], jumped[k] = steps.j_src[e], steps.j_via[e], True
     return Path(nodes, vias, jumped, float(costs[k_steps][end]))
+
+
+class _Steps:
+    """The graph's steps split into mono steps and jumps, with their cost terms.
+
+    Forward pass and backtracking evaluate costs through the same two methods, so the
+    step chosen when backtracking reproduces the forward minimum exactly.
+    """
+
+    def __init__(self, graph: MetaMotionGraph, node_penalty, jump_cost: float):
+        jump = graph.step_jump
+        m, j = np.flatnonzero(~jump), np.flatnonzero(jump)
+        arrive = (np.zeros(graph.n_nodes) if node_penalty is None
+                  else np.asarray(node_penalty, dtype=np.float64))
+        self.m_src, self.m_dst = graph.step_src[m], graph.step_dst[m]
+        self.m_add = arrive[self.m_dst]
+        self.j_src, self.j_via, self.j_dst = graph.step_src[j], graph.step_via[j], graph.step_dst[j]
+        self.j_rho, self.j_w2 = graph.step_rho[j], graph.step_w2[j]
+        self.j_add = jump_cost + arrive[self.j_dst]
+        first = np.r_[True, self.j_dst[1:] != self.j_dst[:-1]] if j.size else np.zeros(0, bool)
+        self.j_starts = np.flatnonzero(first)
+        self.j_nodes = self.j_dst[self.j_starts]
+        # Per node: its incoming mono step (or -1) and its run of incoming jumps.
+        self.mono_into = np.full(graph.n_nodes, -1)
+        self.mono_into[self.m_dst] = np.arange(len(self.m_dst))
+        self.j_first = np.zeros(graph.n_nodes, dtype=np.int64)
+        self.j_last = np.zeros(graph.n_nodes, dtype=np.int64)
+        self.j_first[self.j_nodes] = self.j_starts
+        self.j_last[self.j_nodes] = np.r_[self.j_starts[1:], len(self.j_dst)]
+
+    def mono(self, prev_cost, dev, sel=slice(None)):
+        """Cost of arriving by mono steps ``sel``: eq. (4), first case."""
+        src = self.m_src[sel]
+        return prev_cost[src] + (dev[src] + self.m_add[sel])
+
+    def jump(self, prev_cost, dev, prev_duration, duration, sel=slice(None)):
+        """Cost of arriving by jumps ``sel`` and their mono edge: eq. (4), second case."""
+        factor = _rate_factor(self.j_rho[sel], prev_duration, duration) * self.j_w2[sel]
+        return prev_cost[self.j_src[sel]] + (dev[self.j_via[sel]] * factor + self.j_add[sel])
 
 
 def path_cost(graph: MetaMotionGraph, path: Path, intensity_z, durations_s, prev_duration_s=None) -> float:
