@@ -21,6 +21,10 @@ def atomic_output(path, mode: str = "w", **open_kwargs):
     try:
         with os.fdopen(fd, mode, **open_kwargs) as fh:
             yield fh
+        # mkstemp makes the file private (0600); give it the permissions a plain open() would.
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
