@@ -60,15 +60,6 @@ def angle(a, b) -> np.ndarray:
     return 4.0 * np.arctan2(np.linalg.norm(a - b, axis=-1), np.linalg.norm(a + b, axis=-1))
 
 
-def slerp(a, b, t) -> np.ndarray:
-    """Spherical interpolation from ``a`` (t=0) to ``b`` (t=1), elementwise; ``t`` broadcasts."""
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    t = np.asarray(t, dtype=np.float64)
-    delta = log(mul(inv(a), b))
-    return mul(a, exp(delta * t[..., None]))
-
-
 def nlerp(a, b, t) -> np.ndarray:
     """Normalised linear interpolation along the shorter arc (fast; fine for close rotations)."""
     a = np.asarray(a, dtype=np.float64)

@@ -10,16 +10,6 @@ def frames_to_seconds(frames, fps: float):
     return np.asarray(frames, dtype=float) / fps
 
 
-def seconds_to_frames(seconds, fps: float):
-    """Time in seconds to a fractional frame index."""
-    return np.asarray(seconds, dtype=float) * fps
-
-
-def n_output_frames(duration_s: float, fps: float) -> int:
-    """Frames needed to cover ``duration_s``: frame i shows time i / fps."""
-    return max(1, int(np.floor(duration_s * fps + 1e-9)) + 1)
-
-
 def bpm_from_intervals(intervals_s) -> float:
     """Tempo in beats per minute from beat intervals (median, robust to outliers)."""
     intervals_s = np.asarray(intervals_s, dtype=float)

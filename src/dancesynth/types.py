@@ -56,9 +56,6 @@ class Skeleton:
         order = "".join(c[0] for c in self.channels[joint] if c in ROTATION_CHANNELS)
         return order or "ZXY"
 
-    def has_position_channels(self, joint: int) -> bool:
-        return any(c in POSITION_CHANNELS for c in self.channels[joint])
-
     def children(self, joint: int) -> np.ndarray:
         return np.flatnonzero(self.parents == joint)
 
@@ -66,9 +63,6 @@ class Skeleton:
         """The same skeleton with every length multiplied by ``factor``."""
         return Skeleton(self.names, self.parents, self.offsets * factor, self.channels,
                         {j: o * factor for j, o in self.end_sites.items()})
-
-    def same_topology(self, other: "Skeleton") -> bool:
-        return self.names == other.names and np.array_equal(self.parents, other.parents)
 
 
 @dataclass(eq=False)
