@@ -271,10 +271,10 @@ def test_mel_filterbank_and_onset_envelope_match_librosa():
 
 @pytest.mark.parametrize("kind,bpm", [("click", 60), ("click", 90), ("click", 120), ("click", 150),
                                       ("swing", 90), ("swing", 150), ("drums", 100), ("drums", 128)])
-def test_dp_tracker_finds_the_beats_like_librosa(kind, bpm):
+def test_default_tracker_finds_the_beats_like_librosa(kind, bpm):
     y, truth = TEST_SIGNALS[kind](bpm)
     ours = analyze_music(y=y, sr=SR)
-    assert ours.meta["tracker"] == "dp" and not ours.default_tempo
+    assert ours.meta["tracker"] == "varying" and not ours.default_tempo
     assert beat_hit_rate(ours.beat_times_s, truth) >= 0.9
     assert ours.tempo_bpm == pytest.approx(bpm, rel=0.02)
     theirs = analyze_music(y=y, sr=SR, tracker="librosa")
@@ -282,13 +282,17 @@ def test_dp_tracker_finds_the_beats_like_librosa(kind, bpm):
     assert ours.beat_confidence == pytest.approx(theirs.beat_confidence, abs=0.05)
 
 
-def test_fast_clicks_are_tracked_at_half_tempo():
-    # The log-normal tempo prior centred at 120 bpm prefers 90 to 180 (as librosa's
-    # does): every other click, each on a true beat.
+def test_fast_clicks_are_tracked_at_their_tempo_where_the_global_tracker_halves_it():
+    # The log-normal tempo prior centred at 120 bpm prefers 90 to 180 (librosa's and
+    # the global "dp" tracker take every other click); the default tracker sees the
+    # onsets half-way between those beats and doubles its tempo.
     y, truth = signals.click_track(180, 30.0, offset_s=0.37, accent_every=4)
+    halved = analyze_music(y=y, sr=SR, tracker="dp")
+    assert halved.tempo_bpm == pytest.approx(90, rel=0.02)
+    assert beat_hit_rate(truth, halved.beat_times_s, skip_s=0.0) >= 0.95  # every beat found is true
     features = analyze_music(y=y, sr=SR)
-    assert features.tempo_bpm == pytest.approx(90, rel=0.02)
-    assert beat_hit_rate(truth, features.beat_times_s, skip_s=0.0) >= 0.95  # every beat found is true
+    assert features.tempo_bpm == pytest.approx(180, rel=0.02)
+    assert beat_f_measure(truth, features.beat_times_s) >= 0.95
 
 
 def test_dp_beat_track_reproduces_librosa_at_its_tempo(bundled_song):
@@ -359,12 +363,15 @@ def test_bundled_songs_have_a_clear_beat(path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("path", BUNDLED, ids=[p.stem[:24] for p in BUNDLED])
-def test_bundled_songs_dp_agrees_with_librosa(path):
-    # Same tempo (within 3%: the dp tempo is not rounded to whole frames) and mostly
-    # the same beats; where a song's tempo drifts the two may take the other phase
-    # for a while (Lets_Go_Fishin: F = 0.69; the other songs 0.88 to 1).
+def test_bundled_songs_default_tracker_agrees_with_librosa(path):
+    # Same tempo (within 3%: ours is not rounded to whole frames) and mostly the same
+    # beats on the songs with a steady tempo. Brahms' Hungarian Dance changes tempo
+    # (librosa's one global tempo: 143.6 bpm; ours follows it, median 132.6 bpm).
     ours = analyze_music(path=path)
     theirs = analyze_music(path=path, tracker="librosa")
-    assert ours.tempo_bpm == pytest.approx(theirs.tempo_bpm, rel=0.03)
-    assert beat_f_measure(theirs.beat_times_s, ours.beat_times_s) >= 0.6
+    if path.stem.startswith("Hungarian"):
+        assert ours.beat_confidence > theirs.beat_confidence  # its beats sit better on the onsets
+    else:
+        assert ours.tempo_bpm == pytest.approx(theirs.tempo_bpm, rel=0.03)
+        assert beat_f_measure(theirs.beat_times_s, ours.beat_times_s) >= 0.6
     assert not ours.default_tempo and not theirs.default_tempo

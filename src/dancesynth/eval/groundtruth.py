@@ -1,0 +1,318 @@
+"""Songs with exactly known beats: MIDI written here, rendered to audio by fluidsynth.
+
+Beat trackers are measured against ground truth that nobody annotated by ear: each
+song is generated as MIDI (``mido``) from a ``SongSpec`` -- a tempo map (constant,
+a step, or a ramp), a meter (3/4 or 4/4), straight or swung eighths, with or
+without a drum kit -- so its beat times follow from the tempo map alone. The MIDI
+is rendered with ``fluidsynth`` and a General MIDI soundfont (Debian packages
+``fluidsynth`` and ``timgm6mb-soundfont`` or ``fluid-soundfont-gm``).
+
+Tempo changes happen only on beats (a ramp changes tempo at every beat), and each
+beat's length is computed from the integer microseconds-per-beat stored in the MIDI
+file, so the beat times are exact to the microsecond; ``write_midi`` returns them.
+
+The music: bass on the beats, piano chords (a waltz "oom-pah-pah" in 3/4), a
+seeded melody of quarter, eighth and half notes on a pentatonic scale, and, with
+drums, kick and snare on the beats and hi-hat eighths. Velocities accent the
+downbeat a little, as players do; nothing else marks the beat.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import subprocess
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..io.files import atomic_output
+
+TICKS_PER_BEAT = 480
+RENDER_SR = 22050
+# Where Debian's GM soundfont packages put their files, smallest first.
+SOUNDFONTS = (
+    "/usr/share/sounds/sf2/TimGM6mb.sf2",
+    "/usr/share/sounds/sf2/default-GM.sf2",
+    "/usr/share/sounds/sf2/FluidR3_GM.sf2",
+)
+# Bump when the music written for a spec changes, so cached renders are redone.
+GENERATOR_VERSION = 1
+
+_KICK, _SNARE, _HAT = 36, 38, 42
+_BASS_PROGRAM, _PIANO_PROGRAM = 33, 0
+_MELODY_PROGRAMS = (73, 56, 65, 11)     # flute, trumpet, alto sax, vibraphone
+_PENTATONIC = (0, 2, 4, 7, 9)
+_PROGRESSION = (0, 7, 9, 5)             # I - V - vi - IV, as semitones above the key
+_MINOR_DEGREE = {9}
+
+
+@dataclass(frozen=True)
+class SongSpec:
+    """One generated song.
+
+    ``tempo``: ``(bpm,)`` constant, ``(bpm_a, bpm_b)`` with ``kind="step"`` (the
+    tempo jumps at the middle bar) or ``kind="ramp"`` (the tempo moves linearly from
+    a to b between 25% and 75% of the song, beat by beat).
+    """
+
+    name: str
+    tempo: tuple[float, ...]
+    kind: str = "constant"          # constant | step | ramp
+    beats_per_bar: int = 4
+    drums: bool = True
+    swing: bool = False
+    duration_s: float = 30.0
+    seed: int = 0
+
+    @property
+    def tags(self) -> dict:
+        return {"tempo": self.kind, "meter": f"{self.beats_per_bar}/4", "drums": self.drums, "swing": self.swing}
+
+
+@dataclass(frozen=True)
+class GroundTruthSong:
+    name: str
+    audio_path: Path
+    midi_path: Path
+    beats_s: np.ndarray
+    duration_s: float
+    tags: dict = field(default_factory=dict)
+
+
+def song_specs(*, quick: bool = False) -> list[SongSpec]:
+    """The benchmark's song set: 60-180 bpm, steps, ramps, swing, 3/4 and 4/4, with and without drums.
+
+    ``quick`` keeps 8 songs covering every kind.
+    """
+    specs = [SongSpec(f"const{b}_4-4_drums", (b,), seed=b) for b in (60, 80, 100, 120, 140, 160, 180)]
+    specs += [SongSpec(f"const{b}_4-4_nodrums", (b,), drums=False, seed=b + 1) for b in (70, 110, 150)]
+    specs += [SongSpec(f"const{b}_3-4_drums", (b,), beats_per_bar=3, seed=b + 2) for b in (90, 135)]
+    specs += [SongSpec(f"const{b}_3-4_nodrums", (b,), beats_per_bar=3, drums=False, seed=b + 3) for b in (100, 160)]
+    specs += [SongSpec(f"swing{b}_4-4_drums", (b,), swing=True, seed=b + 4) for b in (95, 125, 155)]
+    specs += [SongSpec("swing115_4-4_nodrums", (115,), swing=True, drums=False, seed=5)]
+    specs += [SongSpec("step90-120_4-4_drums", (90, 120), kind="step", seed=6),
+              SongSpec("step140-100_4-4_drums", (140, 100), kind="step", seed=7),
+              SongSpec("step75-110_4-4_nodrums", (75, 110), kind="step", drums=False, seed=8),
+              SongSpec("step120-150_3-4_drums", (120, 150), kind="step", beats_per_bar=3, seed=9)]
+    specs += [SongSpec("ramp80-130_4-4_drums", (80, 130), kind="ramp", seed=10),
+              SongSpec("ramp160-110_4-4_drums", (160, 110), kind="ramp", seed=11),
+              SongSpec("ramp100-140_4-4_nodrums", (100, 140), kind="ramp", drums=False, seed=12)]
+    if quick:
+        keep = {"const60_4-4_drums", "const120_4-4_drums", "const180_4-4_drums", "const110_4-4_nodrums",
+                "const135_3-4_drums", "swing125_4-4_drums", "step90-120_4-4_drums", "ramp80-130_4-4_drums"}
+        specs = [s for s in specs if s.name in keep]
+    return specs
+
+
+def beat_tempi(spec: SongSpec) -> np.ndarray:
+    """Tempo (bpm) of every beat of the song, whole bars, covering ``spec.duration_s``."""
+    if spec.kind not in ("constant", "step", "ramp"):
+        raise InputError(f"unknown tempo kind {spec.kind!r}; use constant, step or ramp")
+    if spec.kind == "constant" and len(spec.tempo) != 1 or spec.kind != "constant" and len(spec.tempo) != 2:
+        raise InputError(f"{spec.name}: a {spec.kind} tempo needs {1 if spec.kind == 'constant' else 2} values")
+    if not all(20 <= b <= 400 for b in spec.tempo):
+        raise InputError(f"{spec.name}: tempi must be between 20 and 400 bpm, got {spec.tempo}")
+    a = spec.tempo[0]
+    b = spec.tempo[-1]
+    # Enough beats at the faster tempo, trimmed to whole bars below.
+    n = int(np.ceil(spec.duration_s * max(a, b) / 60.0)) + spec.beats_per_bar
+    if spec.kind == "constant":
+        tempi = np.full(n, a)
+    else:
+        n_mean = int(np.ceil(spec.duration_s * (a + b) / 120.0)) + 2 * spec.beats_per_bar
+        n = max(n, n_mean)
+        idx = np.arange(n)
+        if spec.kind == "step":
+            half = _beats_until(a, spec.duration_s / 2, spec.beats_per_bar)
+            tempi = np.where(idx < half, a, b).astype(float)
+        else:
+            start = _beats_until(a, spec.duration_s / 4, spec.beats_per_bar)
+            # The ramp spans half the song at the mean tempo.
+            length = max(int(round(spec.duration_s / 2 * (a + b) / 120.0)), 1)
+            frac = np.clip((idx - start) / length, 0.0, 1.0)
+            tempi = a + (b - a) * frac
+    # Cut at the first bar line at or after the duration.
+    us = microseconds_per_beat(tempi)
+    ends = np.cumsum(us) / 1e6
+    n_beats = int(np.searchsorted(ends, spec.duration_s)) + 1
+    n_beats = int(np.ceil(n_beats / spec.beats_per_bar)) * spec.beats_per_bar
+    return tempi[:n_beats]
+
+
+def _beats_until(bpm: float, seconds: float, beats_per_bar: int) -> int:
+    """Whole bars of beats at ``bpm`` that fit in ``seconds``."""
+    return int(seconds * bpm / 60.0) // beats_per_bar * beats_per_bar
+
+
+def microseconds_per_beat(tempi_bpm: np.ndarray) -> np.ndarray:
+    """The integer tempo a MIDI file stores for each beat."""
+    return np.round(60e6 / np.asarray(tempi_bpm, dtype=np.float64)).astype(np.int64)
+
+
+def beat_times(spec: SongSpec) -> np.ndarray:
+    """Exact beat onsets (s) of the song: the first at 0."""
+    us = microseconds_per_beat(beat_tempi(spec))
+    return np.concatenate(([0], np.cumsum(us)[:-1])) / 1e6
+
+
+def write_midi(spec: SongSpec, path: Path) -> np.ndarray:
+    """Write the song as a type-1 MIDI file; return its beat times (s)."""
+    import mido  # only the ground-truth generator needs it
+
+    rng = np.random.default_rng(spec.seed)
+    tempi = beat_tempi(spec)
+    us = microseconds_per_beat(tempi)
+    n_beats = len(tempi)
+    bpb = spec.beats_per_bar
+    key = 45 + int(rng.integers(0, 7))  # A2..D#3 bass roots
+
+    events: dict[str, list[tuple[float, mido.Message]]] = {"bass": [], "piano": [], "melody": [], "drums": []}
+
+    def note(part: str, channel: int, pitch: int, start_beat: float, length_beats: float, velocity: int):
+        events[part].append((start_beat, mido.Message("note_on", channel=channel, note=pitch, velocity=velocity)))
+        events[part].append((start_beat + length_beats * 0.95,
+                             mido.Message("note_off", channel=channel, note=pitch, velocity=0)))
+
+    offbeat = 2.0 / 3.0 if spec.swing else 0.5
+    melody_pitch = 3  # index into the melody's scale
+    scale = [key + 24 + 12 * octave + step for octave in range(3) for step in _PENTATONIC]
+    for bar in range(n_beats // bpb):
+        first = bar * bpb
+        degree = _PROGRESSION[bar % len(_PROGRESSION)]
+        root = key + degree
+        third = 3 if degree in _MINOR_DEGREE else 4
+        chord = [root + 12, root + 12 + third, root + 19]
+        for beat in range(bpb):
+            accent = 12 if beat == 0 else 0
+            note("bass", 1, root if beat % 2 == 0 else root + 7, first + beat, 0.9, 88 + accent)
+        if bpb == 3:  # oom-pah-pah: the bass is the oom
+            for beat in (1, 2):
+                for p in chord:
+                    note("piano", 2, p, first + beat, 0.5, 62)
+        else:
+            for beat in (0, 2):
+                for p in chord:
+                    note("piano", 2, p, first + beat, 1.8, 70 if beat == 0 else 62)
+        # Melody: a seeded rhythm of half, quarter and eighth notes filling the bar.
+        position = 0.0
+        while position < bpb - 1e-9:
+            choices = [d for d in (2.0, 1.0, 1.0, 0.5, 0.5) if position + d <= bpb + 1e-9]
+            length = float(rng.choice(choices))
+            if length == 0.5:
+                # Eighths come in pairs; the second is swung.
+                melody_pitch = int(np.clip(melody_pitch + rng.integers(-2, 3), 0, len(scale) - 1))
+                note("melody", 3, scale[melody_pitch], first + position, offbeat, 80)
+                melody_pitch = int(np.clip(melody_pitch + rng.integers(-2, 3), 0, len(scale) - 1))
+                note("melody", 3, scale[melody_pitch], first + position + offbeat, 1.0 - offbeat, 72)
+                length = 1.0
+            else:
+                melody_pitch = int(np.clip(melody_pitch + rng.integers(-2, 3), 0, len(scale) - 1))
+                note("melody", 3, scale[melody_pitch], first + position, length, 84)
+            position += length
+        if spec.drums:
+            for beat in range(bpb):
+                if beat == 0 or (bpb == 4 and beat == 2):
+                    note("drums", 9, _KICK, first + beat, 0.25, 100)
+                else:
+                    note("drums", 9, _SNARE, first + beat, 0.25, 90 if bpb == 4 else 70)
+                note("drums", 9, _HAT, first + beat, 0.25, 70)
+                note("drums", 9, _HAT, first + beat + offbeat, 0.25, 50)
+
+    mid = mido.MidiFile(type=1, ticks_per_beat=TICKS_PER_BEAT)
+    conductor = mido.MidiTrack()
+    conductor.append(mido.MetaMessage("time_signature", numerator=bpb, denominator=4, time=0))
+    last_tick = 0
+    for i, tempo in enumerate(us):
+        if i == 0 or tempo != us[i - 1]:
+            conductor.append(mido.MetaMessage("set_tempo", tempo=int(tempo), time=i * TICKS_PER_BEAT - last_tick))
+            last_tick = i * TICKS_PER_BEAT
+    mid.tracks.append(conductor)
+    programs = {"bass": (1, _BASS_PROGRAM), "piano": (2, _PIANO_PROGRAM),
+                "melody": (3, _MELODY_PROGRAMS[spec.seed % len(_MELODY_PROGRAMS)])}
+    for part, messages in events.items():
+        if not messages:
+            continue
+        track = mido.MidiTrack()
+        if part in programs:
+            channel, program = programs[part]
+            track.append(mido.Message("program_change", channel=channel, program=program, time=0))
+        tick = 0
+        # note_offs before note_ons at the same tick, so repeated notes retrigger
+        for start, msg in sorted(messages, key=lambda e: (e[0], e[1].type == "note_on")):
+            at = int(round(start * TICKS_PER_BEAT))
+            track.append(msg.copy(time=at - tick))
+            tick = at
+        mid.tracks.append(track)
+    with atomic_output(Path(path), "wb") as fh:
+        mid.save(file=fh)
+    return np.concatenate(([0], np.cumsum(us)[:-1])) / 1e6
+
+
+def find_soundfont() -> Path:
+    """A General MIDI soundfont from Debian's packages, or a clear error saying what to install."""
+    for candidate in SOUNDFONTS:
+        if Path(candidate).is_file():
+            return Path(candidate)
+    raise InputError("no General MIDI soundfont found; install one: apt-get install timgm6mb-soundfont")
+
+
+def render_midi(midi_path: Path, wav_path: Path, *, soundfont: Path | None = None, sr: int = RENDER_SR) -> None:
+    """Render a MIDI file to a wav with fluidsynth (no audio device, no reverb or chorus)."""
+    exe = shutil.which("fluidsynth")
+    if exe is None:
+        raise InputError("fluidsynth is not installed; install it: apt-get install fluidsynth timgm6mb-soundfont")
+    soundfont = soundfont or find_soundfont()
+    wav_path = Path(wav_path)
+    tmp = wav_path.with_name(f".{wav_path.name}.part")
+    cmd = [exe, "-n", "-i", "-q", "-R", "0", "-C", "0", "-g", "0.6", "-r", str(sr), "-T", "wav",
+           "-F", str(tmp), str(soundfont), str(midi_path)]
+    try:
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+        if done.returncode != 0 or not tmp.is_file() or tmp.stat().st_size < 1000:
+            raise InputError(f"fluidsynth could not render {midi_path}: {done.stderr.strip()[-300:]}")
+        os.replace(tmp, wav_path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def render_song(spec: SongSpec, out_dir: Path, *, soundfont: Path | None = None) -> GroundTruthSong:
+    """The song's MIDI, wav and beat list in ``out_dir`` (made only when missing)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    midi_path = out_dir / f"{spec.name}.mid"
+    wav_path = out_dir / f"{spec.name}.wav"
+    beats_path = out_dir / f"{spec.name}.beats.json"
+    beats = beat_times(spec)
+    if not midi_path.is_file():
+        write_midi(spec, midi_path)
+    if not wav_path.is_file():
+        render_midi(midi_path, wav_path, soundfont=soundfont)
+    if not beats_path.is_file():
+        with atomic_output(beats_path) as fh:
+            fh.write(json.dumps({"beats": beats.tolist(), "spec": asdict(spec)}, indent=1))
+    return GroundTruthSong(spec.name, wav_path, midi_path, beats, spec.duration_s, spec.tags)
+
+
+def ground_truth_set(cache_dir: Path, *, quick: bool = False, specs: list[SongSpec] | None = None,
+                     progress=None) -> list[GroundTruthSong]:
+    """Render (once) and return the benchmark's ground-truth songs, cached under ``cache_dir``.
+
+    The cache folder's name hashes the specs, the generator version and the
+    soundfont, so a change to any of them renders afresh.
+    """
+    specs = song_specs(quick=quick) if specs is None else specs
+    soundfont = find_soundfont()
+    key = hashlib.sha256(json.dumps([GENERATOR_VERSION, str(soundfont), [asdict(s) for s in specs]],
+                                    sort_keys=True).encode()).hexdigest()[:12]
+    out_dir = Path(cache_dir) / f"groundtruth-{key}"
+    songs = []
+    for i, spec in enumerate(specs):
+        if progress is not None:
+            progress(f"ground truth {i + 1}/{len(specs)}: {spec.name}")
+        songs.append(render_song(spec, out_dir, soundfont=soundfont))
+    return songs
