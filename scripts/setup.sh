@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Set up dancesynth on a fresh Debian/Ubuntu machine: system tools, a virtual environment, the package.
-#   bash scripts/setup.sh          # what `dancesynth dance` needs
+#   bash scripts/setup.sh          # what `dancesynth dance`, `eval` and `bench` need
 #   bash scripts/setup.sh --test   # plus what the tests use (pytest, three.js, Blender for import checks)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -8,12 +8,16 @@ want_tests=0
 [ "${1:-}" = "--test" ] && want_tests=1
 
 # command:package pairs; only missing commands are installed
-needs="ffmpeg:ffmpeg ffprobe:ffmpeg"
+# (fluidsynth renders the generated beat ground truth of `dancesynth bench`)
+needs="ffmpeg:ffmpeg ffprobe:ffmpeg fluidsynth:fluidsynth"
 [ $want_tests = 1 ] && needs="$needs blender:blender node:nodejs npm:npm"
 missing=""
 for pair in $needs; do
   command -v "${pair%%:*}" >/dev/null 2>&1 || missing="$missing ${pair##*:}"
 done
+soundfont=0  # any General MIDI soundfont will do
+for sf in TimGM6mb.sf2 default-GM.sf2 FluidR3_GM.sf2; do [ -f "/usr/share/sounds/sf2/$sf" ] && soundfont=1; done
+[ $soundfont = 1 ] || missing="$missing timgm6mb-soundfont"
 missing=$(echo $missing | tr ' ' '\n' | sort -u | tr '\n' ' ')
 if [ -n "${missing// /}" ]; then
   if [ "$(id -u)" = 0 ]; then SUDO=""; elif command -v sudo >/dev/null; then SUDO="sudo"; else
