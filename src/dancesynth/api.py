@@ -123,6 +123,9 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
     root = np.concatenate([s.root_pos for s in segments])
     contacts = np.concatenate([s.contacts for s in segments])
     jumps = np.concatenate([s.pieces.t0[s.pieces.jump] for s in segments])
+    # The beat grid starts before 0 s so that a piece covers the first frame; a jump
+    # before the first frame is never seen.
+    jumps = jumps[(jumps >= 0.0) & (jumps < music.duration_s)]
     summary = {
         "song": music.source if isinstance(song, MusicFeatures) else str(song),
         "duration_s": music.duration_s, "tempo_bpm": music.tempo_bpm, "beats": music.n_beats,

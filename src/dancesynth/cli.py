@@ -67,8 +67,11 @@ def cli():
 @click.option("--thr", type=float, default=None, help="Eq. (2) floor of a transition's weight, > 1 (default 1.5).")
 @click.option("--paper", is_flag=True,
               help="Xu et al.'s objective exactly: no repeat penalty, jump cost or jump limits, literal eq. (1).")
+@click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Also write a JSON report (beats, transitions, time warps) for 'dancesynth eval --report'.")
 @click.option("-q", "--quiet", is_flag=True, help="No summary and no progress bar.")
-def dance(song, output, style, engine, segment_seconds, fps, seed, database, max_minutes, ths, thr, paper, quiet):
+def dance(song, output, style, engine, segment_seconds, fps, seed, database, max_minutes, ths, thr, paper,
+          report_path, quiet):
     """Make a beat-synchronised dance for SONG (wav, ogg, flac, mp3, ...) and write it as BVH."""
     from .api import DanceConfig, dance as make_dance
     from .io.bvh import write_bvh
@@ -97,6 +100,10 @@ def dance(song, output, style, engine, segment_seconds, fps, seed, database, max
         progress.close()
     t = time.perf_counter()
     write_bvh(output, clip)
+    if report_path is not None:
+        from .eval.report import dance_report
+
+        _write_json(report_path, dance_report(clip))
     s = clip.meta["summary"]
     s["timings_s"]["write_s"] = time.perf_counter() - t
     if quiet:
@@ -149,6 +156,98 @@ def build_db(source, output, beats, manifest):
     db.source = str(source)
     save_database(db, output)
     click.echo(f"wrote {output}: {len(db.styles)} styles from {len(sources)} files")
+
+
+def _write_json(path: Path, data) -> None:
+    import json
+
+    from .io.files import atomic_output
+
+    with atomic_output(path) as fh:
+        json.dump(data, fh, indent=1, allow_nan=False)
+        fh.write("\n")
+
+
+@cli.command()
+@click.argument("song", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the beats as JSON: {\"beats\": [seconds...], \"tempo\": bpm, ...}.")
+@click.option("--tracker", default=None, help="Beat tracker (default: the product's, 'varying').")
+def beats(song, json_path, tracker):
+    """Print the beats dancesynth hears in SONG (the ones `dance` lands motion beats on)."""
+    from .music import DEFAULT_TRACKER, TRACKERS, analyze_music
+
+    tracker = tracker or DEFAULT_TRACKER
+    if tracker not in TRACKERS:
+        raise InputError(f"unknown tracker {tracker!r}; choose one of {', '.join(sorted(TRACKERS))}")
+    music = analyze_music(path=song, tracker=tracker)
+    data = {"beats": [round(float(b), 4) for b in music.beat_times_s], "tempo": round(music.tempo_bpm, 2),
+            "duration_s": round(music.duration_s, 3), "confidence": round(music.beat_confidence, 3),
+            "default_tempo": bool(music.default_tempo), "tracker": tracker,
+            "intensity_db": [round(float(v), 2) for v in music.intensity_db]}
+    if json_path is not None:
+        _write_json(json_path, data)
+    note = " (no clear beat: a steady default tempo)" if music.default_tempo else ""
+    click.echo(f"{song}: {music.duration_s:.1f} s, {music.tempo_bpm:.1f} bpm, {len(music.beat_times_s)} beats, "
+               f"confidence {music.beat_confidence:.2f}{note}")
+    click.echo(" ".join(f"{b:.3f}" for b in music.beat_times_s))
+
+
+@cli.command("eval")
+@click.argument("dance_path", metavar="DANCE.bvh", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("song", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write every metric as JSON.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Draw speed, kinematic beats and music beats (Aristidou et al. Fig. 7) to a PNG/PDF/SVG.")
+@click.option("--reference", "reference_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Also evaluate this motion (e.g. real mocap) against the song, by the same code.")
+@click.option("--style", help="Compare smoothness with this style's mocap (default: the report's or best match).")
+@click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="The dance's JSON from 'dancesynth dance --report' (adds transition and time-warp metrics).")
+@click.option("--database", type=click.Path(file_okay=False, path_type=Path),
+              help="The database the style comes from (default: the bundled one).")
+def eval_(dance_path, song, json_path, plot_path, reference_path, style, report_path, database):
+    """Measure a dance against its song: beat alignment, intensity, smoothness, foot contact, time warp."""
+    from .eval.evaluate import format_table
+    from .eval.report import beat_plot_data, evaluate_files, plot_beats
+
+    for out in (json_path, plot_path):
+        if out is not None and not out.parent.is_dir():
+            raise InputError(f"cannot write {out}: folder {out.parent} does not exist")
+    result = evaluate_files(dance_path, song, reference_path=reference_path, report_path=report_path,
+                            style=style, database=database)
+    columns = {"dance": result["dance"]}
+    if "reference" in result:
+        columns["reference"] = result["reference"]
+    s = result["song"]
+    click.echo(f"song   {song}: {s['duration_s']:.1f} s, {s['tempo_bpm']:.1f} bpm, {s['beats']} beats")
+    click.echo(f"mocap  {result['mocap_style'] or 'none with this skeleton (use --style)'}")
+    click.echo(format_table(columns))
+    if json_path is not None:
+        _write_json(json_path, result)
+    if plot_path is not None:
+        from .io.bvh import read_bvh
+        from .music import analyze_music
+
+        music = analyze_music(path=song)
+        data = beat_plot_data(read_bvh(dance_path), music.beat_times_s)
+        plot_beats(data, plot_path, title=f"{dance_path.name}: speed, kinematic beats, music beats",
+                   window_s=(0.0, min(20.0, music.duration_s)))
+        click.echo(f"wrote  {plot_path}")
+
+
+@cli.command()
+@click.option("--quick", is_flag=True, help="A smaller run (under 2 minutes).")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=Path("bench-results"),
+              show_default=True, help="Folder for bench.json.")
+def bench(quick, out_dir):
+    """Benchmarks: synthesis time (Xu Fig. 4), scaling, quality table, beat tracking on generated songs."""
+    from .eval.bench import format_bench, run_bench
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    result = run_bench(quick=quick, out_dir=out_dir, progress=lambda msg: click.echo(msg, err=True))
+    click.echo(format_bench(result))
+    click.echo(f"wrote {out_dir / 'bench.json'}")
 
 
 def main(argv=None) -> int:
