@@ -1,0 +1,248 @@
+"""``dancesynth bench``: the benchmark as a library call.
+
+    result = run_bench(quick=True, out_dir=Path("bench-out"), progress=print)
+    print(format_bench(result))
+
+Sections (each records ``{"skipped": reason}`` instead when it cannot run, and the
+others still run):
+
+1. ``fig4`` -- Xu et al. Fig. 4: synthesis time per segment (streaming step vs the
+   global DP over the same music length) and the fit of time on D*N*P*L.
+2. ``scaling`` -- build time, search time and peak memory with the database
+   replicated 1x..10x (a fresh process per size).
+3. ``pipeline`` -- the bundled graphs built and reloaded, a 3-minute song to BVH.
+4. ``quality`` -- every metric of ``dancesynth.eval.evaluate`` for our dance, the
+   global-DP baseline, a random walk on the same graph and the raw mocap.
+5. ``beat_tracking`` -- every beat tracker on generated songs with exact beats.
+
+``run_bench`` writes ``bench.json`` into ``out_dir`` and returns the same dict;
+``format_bench`` turns it into the tables (same layout every run of a mode).
+Library code never prints: progress goes to ``progress(message)``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import platform
+import time
+import traceback
+from dataclasses import asdict
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+from .bench_common import SECTIONS, BenchConfig, Progress, skipped
+
+__all__ = ["BenchConfig", "SECTIONS", "run_bench", "format_bench"]
+
+BENCH_FORMAT = 1
+TITLES = {"fig4": "1. Synthesis time per segment (Xu et al. Fig. 4)",
+          "scaling": "2. Growth with the database",
+          "pipeline": "3. Graphs and a song end to end",
+          "quality": "4. Quality on the bundled music",
+          "beat_tracking": "5. Beat tracking on generated ground truth"}
+
+
+def machine_info() -> dict:
+    import scipy
+
+    return {"cpus": os.cpu_count(), "affinity_cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+            else None, "machine": platform.machine(), "processor": platform.processor() or platform.machine(),
+            "system": f"{platform.system()} {platform.release()}", "python": platform.python_version(),
+            "numpy": np.__version__, "scipy": scipy.__version__}
+
+
+class _Skip(Exception):
+    """A section cannot run here (a missing program or module): recorded, not raised."""
+
+
+def run_bench(*, quick: bool, out_dir: Path, progress: Progress | None = None,
+              config: BenchConfig | None = None) -> dict:
+    """Run the benchmark; write ``out_dir/bench.json`` and return the same dict.
+
+    ``quick`` picks ``BenchConfig.quick()`` (under two minutes on a 2-core CPU)
+    instead of ``BenchConfig.full()``; ``config`` overrides both (tests shrink it).
+    """
+    from .. import __version__
+
+    cfg = config or (BenchConfig.quick() if quick else BenchConfig.full())
+    unknown = set(cfg.sections) - set(SECTIONS)
+    if unknown:
+        raise ValueError(f"unknown bench section(s) {sorted(unknown)}: use {', '.join(SECTIONS)}")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    result = {"format": BENCH_FORMAT, "mode": "quick" if quick else "full", "dancesynth": __version__,
+              "started": datetime.now(timezone.utc).isoformat(timespec="seconds"), "machine": machine_info(),
+              "config": _jsonable(asdict(cfg)), "timings_s": {}}
+    t_all = time.perf_counter()
+    shared: dict = {}
+    for name in SECTIONS:
+        if name not in cfg.sections:
+            result[name] = {"skipped": "not selected"}
+            continue
+        if progress:
+            progress(f"section {name}")
+        t = time.perf_counter()
+        try:
+            result[name] = _run_section(name, cfg, shared, progress)
+        except _Skip as exc:
+            result[name] = {"skipped": str(exc)}
+        except Exception as exc:  # one broken section must not lose the others' numbers
+            result[name] = {"skipped": f"failed: {type(exc).__name__}: {exc}",
+                            "traceback": traceback.format_exc(limit=8)}
+        result["timings_s"][name] = time.perf_counter() - t
+    result["timings_s"]["total"] = time.perf_counter() - t_all
+    result["targets"] = targets(result)
+    result = _jsonable(result)
+    tmp = out_dir / ".bench.json.part"
+    tmp.write_text(json.dumps(result, indent=1))
+    os.replace(tmp, out_dir / "bench.json")
+    return result
+
+
+def _run_section(name: str, cfg: BenchConfig, shared: dict, progress) -> dict:
+    if name in ("fig4", "scaling", "pipeline", "quality") and "db" not in shared:
+        from ..motion.database import open_database
+
+        shared["db"] = open_database()
+    if name in ("fig4", "scaling") and "music" not in shared:
+        from .bench_common import load_song
+
+        shared["music"] = load_song(cfg.song, cfg.song_max_s)
+    if name == "fig4":
+        from .bench_speed import fig4
+
+        return fig4(cfg, shared["db"], shared["music"], progress)
+    if name == "scaling":
+        from .bench_speed import scaling
+
+        return scaling(cfg, shared["db"], shared["music"], progress)
+    if name == "pipeline":
+        from .bench_speed import pipeline
+
+        return pipeline(cfg, shared["db"], progress)
+    if name == "quality":
+        try:
+            importlib.import_module(".evaluate", __package__)
+        except ImportError as exc:
+            raise _Skip(f"the metrics module is not available ({exc})") from None
+        from .bench_quality import quality
+
+        return quality(cfg, shared["db"], progress)
+    if name == "beat_tracking":
+        import shutil
+
+        from ..errors import InputError
+
+        if shutil.which("fluidsynth") is None:
+            raise _Skip("fluidsynth is not installed (apt-get install fluidsynth timgm6mb-soundfont)")
+        try:
+            importlib.import_module(".groundtruth", __package__)
+        except ImportError as exc:
+            raise _Skip(f"the ground-truth module is not available ({exc})") from None
+        from .bench_beats import beat_tracking
+
+        try:
+            return beat_tracking(cfg, progress)
+        except InputError as exc:  # no soundfont, a render failed: say what to install
+            raise _Skip(str(exc)) from None
+    raise ValueError(name)
+
+
+# The product's performance targets (README): name -> (section, how to read the value, limit).
+TARGETS = {
+    "search per 5 s segment, ms (largest style)": ("fig4", lambda s: _row(s, "segment_s", 5.0)
+                                                   ["stream_search_ms"]["median"], 2.0),
+    "search per 5 s segment, ms (database x10)": ("scaling", lambda s: _row(s, "times", 10)["search_ms_median"],
+                                                  20.0),
+    "building every bundled graph, s": ("pipeline", lambda s: s["graph_build_total_s"], 10.0),
+    "reloading a graph from the cache, s": ("pipeline", lambda s: max(g["reload_ms"] for g in s["graphs"]) / 1e3,
+                                            0.5),
+    "a 3-minute song to BVH, s": ("pipeline", lambda s: s["wall_s_median"] if s["song_s"] >= 180 else None, 5.0),
+    "peak memory, default graph, MB": ("scaling", lambda s: max(_row(s, "times", 1)[k] for k in
+                                                                 ("build_peak_mb", "stream_peak_mb")), 1024.0),
+    "peak memory, database x10, MB": ("scaling", lambda s: max(_row(s, "times", 10)[k] for k in
+                                                                ("build_peak_mb", "stream_peak_mb")), 1024.0),
+}
+
+
+def _row(section: dict, key: str, value) -> dict:
+    for r in section["rows"]:
+        if r[key] == value:
+            return r
+    raise KeyError(f"no row with {key} = {value}")
+
+
+def targets(result: dict) -> dict:
+    """Each target: its value, limit and whether it is met (``None`` where this run did not measure it)."""
+    out = {}
+    for name, (section, read, limit) in TARGETS.items():
+        try:
+            value = None if skipped(result.get(section, {})) else read(result[section])
+        except (KeyError, TypeError, ValueError):
+            value = None
+        out[name] = {"value": value, "limit": limit, "met": None if value is None else bool(value <= limit)}
+    return out
+
+
+def _jsonable(x):
+    """Plain JSON types: numpy scalars and arrays, paths, tuples, non-finite floats (as null)."""
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return float(x) if np.isfinite(x) else None
+    if x is None or isinstance(x, str):
+        return x
+    if hasattr(x, "__dataclass_fields__"):
+        return _jsonable(asdict(x))
+    return str(x)
+
+
+def format_bench(result: dict) -> str:
+    """The benchmark's tables as text: a header, then each section's table (or why it was skipped)."""
+    from .bench_beats import format_beat_tracking
+    from .bench_quality import format_quality
+    from .bench_speed import format_fig4, format_pipeline, format_scaling
+
+    formatters = {"fig4": format_fig4, "scaling": format_scaling, "pipeline": format_pipeline,
+                  "quality": format_quality, "beat_tracking": format_beat_tracking}
+    m = result.get("machine", {})
+    timings = result.get("timings_s", {})
+    out = [f"dancesynth {result.get('dancesynth', '?')} bench ({result.get('mode', '?')}), {result.get('started', '')}",
+           f"machine: {m.get('cpus')} CPUs ({m.get('processor')}), {m.get('system')}, Python {m.get('python')}, "
+           f"numpy {m.get('numpy')}, scipy {m.get('scipy')}"]
+    for name in SECTIONS:
+        section = result.get(name, {"skipped": "missing"})
+        took = timings.get(name)
+        out.append("")
+        out.append(f"== {TITLES[name]}" + (f" [{took:.1f} s]" if took is not None else ""))
+        reason = skipped(section)
+        if reason:
+            out.append(f"skipped: {reason}")
+            continue
+        try:
+            out.append(formatters[name](section))
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            out.append(f"(cannot format this section: {type(exc).__name__}: {exc})")
+    if result.get("targets"):
+        out += ["", "Targets"]
+        width = max(len(k) for k in result["targets"])
+        for name, t in result["targets"].items():
+            verdict = "not measured" if t["met"] is None else (
+                f"{t['value']:.3g} (<= {t['limit']:g}): {'met' if t['met'] else 'NOT MET'}")
+            out.append(f"  {name.ljust(width)}  {verdict}")
+    if "total" in timings:
+        out += ["", f"total {timings['total']:.1f} s"]
+    return "\n".join(out)
+

@@ -1,0 +1,131 @@
+"""What the benchmark sections share: their settings, the bundled data, table layout, fits."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..types import MusicFeatures
+
+MUSIC_DIR = Path(__file__).resolve().parents[1] / "data" / "music"
+DEFAULT_SONG = "Kevin_MacLeod_-_Vibe_Ace.ogg"  # the README's demo song
+SECTIONS = ("fig4", "scaling", "pipeline", "quality", "beat_tracking")
+
+Progress = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """How much the benchmark measures; ``full()`` and ``quick()`` are the two product settings.
+
+    Tests shrink a ``quick()`` further with ``dataclasses.replace``.
+    """
+
+    sections: tuple[str, ...] = SECTIONS
+    # 1. Xu Fig. 4: per-segment synthesis time on the largest style and the bundled song.
+    song: str = DEFAULT_SONG
+    song_max_s: float | None = None     # cut the song (fig4 and scaling) to its first seconds
+    segments_s: tuple[float, ...] = (2.0, 5.0, 10.0, 15.0, 20.0, 30.0)
+    whole_song_row: bool = True         # one more row: the whole song as one segment
+    repeats: int = 7
+    # 2. Scaling: the largest style replicated, each size in its own process.
+    scales: tuple[int, ...] = (1, 2, 5, 10)
+    scale_segment_s: float = 5.0
+    scale_timeout_s: float = 600.0
+    # Pipeline: bundled graphs built and reloaded, a long song to BVH end to end.
+    pipeline_song_s: float = 180.0
+    pipeline_runs: int = 3
+    # 3. Quality: bundled songs (None: all), optionally cut short.
+    quality_songs: tuple[str, ...] | None = None
+    quality_max_s: float | None = None
+    mocap_max_clips: int | None = None  # evaluate at most this many clips per style (None: all)
+    seed: int = 0                       # the random walk's seed
+    # 4. Beat tracking on generated ground truth.
+    groundtruth_quick: bool = False
+    groundtruth_specs: tuple | None = None  # SongSpecs overriding the standard set (tests)
+    groundtruth_dir: Path | None = None     # cache of rendered songs (None: the dancesynth cache)
+    trackers: tuple[str, ...] | None = None  # None: every tracker in TRACKERS
+
+    @classmethod
+    def full(cls) -> "BenchConfig":
+        return cls()
+
+    @classmethod
+    def quick(cls) -> "BenchConfig":
+        """Under two minutes on a 2-core CPU."""
+        return replace(cls(), segments_s=(2.0, 5.0, 10.0, 30.0), repeats=5, scales=(1, 2), pipeline_runs=1,
+                       quality_songs=(DEFAULT_SONG,), quality_max_s=60.0, mocap_max_clips=6,
+                       groundtruth_quick=True)
+
+
+def load_song(name: str, max_s: float | None = None) -> MusicFeatures:
+    """Analyse a bundled song (by file name, or any path), optionally keeping its first ``max_s`` seconds."""
+    from ..music import analyze_music
+
+    path = Path(name) if Path(name).is_file() else MUSIC_DIR / name
+    music = analyze_music(path=path)
+    return truncate_music(music, max_s) if max_s else music
+
+
+def truncate_music(music: MusicFeatures, max_s: float) -> MusicFeatures:
+    """The first ``max_s`` seconds of analysed music: the beats before it and their intervals' loudness."""
+    if music.duration_s <= max_s:
+        return music
+    keep = int(np.searchsorted(music.beat_times_s, max_s, side="right"))
+    keep = max(keep, 2)
+    return replace(music, duration_s=float(max(max_s, music.beat_times_s[keep - 1])),
+                   beat_times_s=music.beat_times_s[:keep], intensity_db=music.intensity_db[:keep - 1])
+
+
+def largest_style(db):
+    """The style with the most beats (the paper's Fig. 4 uses one dance's whole graph)."""
+    return max(db.styles.values(), key=lambda s: (len(s.beat_frames), s.name))
+
+
+def linear_fit(x, y) -> dict:
+    """Least squares ``y = slope * x + intercept`` with its coefficient of determination."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    if len(x) < 2 or np.ptp(x) == 0:
+        return {"slope": None, "intercept": None, "r2": None, "points": int(len(x))}
+    slope, intercept = np.polyfit(x, y, 1)
+    ss_tot = float(np.sum((y - y.mean()) ** 2))
+    r2 = 1.0 - float(np.sum((y - (slope * x + intercept)) ** 2)) / ss_tot if ss_tot > 0 else 1.0
+    return {"slope": float(slope), "intercept": float(intercept), "r2": float(min(max(r2, 0.0), 1.0)),
+            "points": int(len(x))}
+
+
+# ---------------------------------------------------------------------------------------------
+# Tables: right-aligned columns, a rule under the header; a value is a number, text or None.
+
+
+def cell(value, digits: int = 2) -> str:
+    if value is None or (isinstance(value, float) and not np.isfinite(value)):
+        return "-"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        return f"{value:.{digits}f}"
+    return str(value)
+
+
+def table(title: str, header: list[str], rows: list[list], digits: list[int] | None = None,
+          notes: list[str] = ()) -> str:
+    """A plain-text table; ``digits[i]`` decimals for floats in column ``i``."""
+    digits = digits or [2] * len(header)
+    text = [[cell(v, d) for v, d in zip(r, digits)] for r in rows]
+    widths = [max([len(h)] + [len(r[i]) for r in text]) for i, h in enumerate(header)]
+
+    def line(cells):
+        return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths))).rstrip()
+
+    out = [title, line(header), line(["-" * w for w in widths])] + [line(r) for r in text]
+    return "\n".join(out + [f"  {n}" for n in notes])
+
+
+def skipped(section: dict) -> str | None:
+    return section.get("skipped") if isinstance(section, dict) else "missing"
