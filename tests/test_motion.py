@@ -50,10 +50,23 @@ def test_pca_beats_land_on_the_turns_of_a_swing():
 def test_kinematic_beats_are_speed_minima():
     clip, turns = swinging_body(period_s=0.8)
     _, g_pos = clip_fk(clip)
-    beats = mb.kinematic_beats(mb.summed_speed(g_pos, clip.fps), clip.fps)
+    beats, smooth = mb.kinematic_beats(mb.summed_speed(g_pos, clip.fps), clip.fps)
     inner = beats[(beats > 30) & (beats < clip.n_frames - 30)]
     assert len(inner) >= len(turns) - 4
     assert np.abs(inner[:, None] - turns[None, :]).min(axis=1).max() <= 2
+    assert smooth.shape == (clip.n_frames,)
+
+
+def test_beats_snap_to_nearby_accents_only():
+    beats = np.array([0, 30, 60, 90, 120])
+    accents = np.array([4, 33, 47, 61, 62, 119])
+    # 4 and 33 are within 0.2 * 30 = 6 frames; 47 is too far from 60's neighbours;
+    # 60 takes 61; 90 has no accent near; 120 takes 119.
+    np.testing.assert_array_equal(mb.snap_beats(beats, accents, fraction=0.2), [4, 33, 61, 90, 119])
+    np.testing.assert_array_equal(mb.snap_beats(beats, accents, fraction=0.0), beats)
+    # Two beats that would land on one accent both stay where they were.
+    np.testing.assert_array_equal(mb.snap_beats(np.array([10, 14, 40]), np.array([12]), fraction=0.5), [10, 14, 40])
+    assert mb.snap_beats(beats, np.zeros(0, dtype=int), fraction=0.2).tolist() == beats.tolist()
 
 
 def test_kinetic_energy_of_a_gliding_body():

@@ -144,15 +144,18 @@ def styles(database):
               help="Folder to write the database to.")
 @click.option("--beats", type=click.Choice(["pca", "kinematic"]), default="pca", show_default=True,
               help="Motion beats by short-term PCA (Xu et al.) or by speed minima.")
+@click.option("--snap", type=click.FloatRange(0.0, 0.5), default=0.2, show_default=True,
+              help="Move PCA beats to a speed minimum within this fraction of a beat (0: regular PCA beats).")
 @click.option("--manifest", type=click.Path(dir_okay=False, path_type=Path),
               help="A genres.toml mapping genres to file patterns (default: SOURCE/genres.toml or sub-folders).")
-def build_db(source, output, beats, manifest):
+def build_db(source, output, beats, snap, manifest):
     """Analyse a folder of BVH files (one sub-folder per genre, or a genres.toml) into a database."""
     from .motion.database import AnalysisConfig, build_database, collect_sources, save_database
 
     sources = collect_sources(source, manifest)
     with click.progressbar(length=len(sources), label="analysing", file=sys.stderr) as bar:
-        db = build_database(sources, AnalysisConfig(beat_method=beats), progress=lambda _: bar.update(1))
+        db = build_database(sources, AnalysisConfig(beat_method=beats, snap_beats=snap),
+                            progress=lambda _: bar.update(1))
     db.source = str(source)
     save_database(db, output)
     click.echo(f"wrote {output}: {len(db.styles)} styles from {len(sources)} files")

@@ -14,6 +14,7 @@ import numpy as np
 from .. import rotations as rot
 from ..errors import InputError
 from ..kinematics import clip_fk
+from ..motion.beats import kinematic_beats as motion_kinematic_beats
 from ..motion.beats import summed_speed
 from ..motion.features import foot_points, interval_energy, kinetic_energy
 from ..motion.roles import bone_masses, find_roles
@@ -111,20 +112,11 @@ def kinematic_beats(motion: MotionClip, *, smooth_s: float = DEFAULT_SMOOTH_S, p
         raise InputError(f"polyorder must be a non-negative integer (2 = quadratic), got {polyorder!r}")
     if not min_prominence_frac >= 0:
         raise InputError(f"min_prominence_frac must be >= 0 (0 keeps every minimum), got {min_prominence_frac!r}")
-    from scipy import signal
-
     fps = motion.fps
     speed = summed_speed(_positions(motion, global_pos), fps)
-    polyorder = int(polyorder)
-    win = max(int(round(smooth_s * fps)) | 1, polyorder + 1 + polyorder % 2)
-    if speed.size <= win:
-        return np.zeros(0), speed, speed.copy()
-    smooth = signal.savgol_filter(speed, win, polyorder)
-    order = max(1, int(round(min_separation_s * fps / 2)))
-    frames = signal.argrelmin(smooth, order=order)[0]
-    if frames.size and min_prominence_frac > 0:
-        prominence = signal.peak_prominences(-smooth, frames)[0]
-        frames = frames[prominence >= min_prominence_frac * float(np.mean(smooth))]
+    frames, smooth = motion_kinematic_beats(speed, fps, smooth_s=smooth_s, polyorder=int(polyorder),
+                                            min_separation_s=min_separation_s,
+                                            min_prominence_frac=min_prominence_frac)
     return frames / fps, speed, smooth
 
 

@@ -91,13 +91,52 @@ def summed_speed(global_pos: np.ndarray, fps: float) -> np.ndarray:
 
 
 def kinematic_beats(speed: np.ndarray, fps: float, *, smooth_s: float = 0.15, polyorder: int = 2,
-                    min_separation_s: float = 0.1) -> np.ndarray:
-    """Frames of local minima of the Savitzky-Golay-smoothed speed curve."""
+                    min_separation_s: float = 0.1, min_prominence_frac: float = 0.05,
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Frames of local minima of the Savitzky-Golay-smoothed speed curve, and that curve.
+
+    A minimum must be the lowest frame within +-``min_separation_s / 2`` and dip at
+    least ``min_prominence_frac`` times the mean smoothed speed below the lower of
+    its two neighbouring peaks (sensor noise on a still body makes tiny dips that
+    are not movement accents; 0 keeps every minimum). A curve not longer than the
+    smoothing window has no minima (and is returned unsmoothed).
+    """
     from scipy import signal  # costs ~0.8 s to import; only analysis needs it
 
-    win = max(polyorder + 2, int(round(smooth_s * fps)) | 1)
+    speed = np.asarray(speed, dtype=np.float64)
+    win = max(int(round(smooth_s * fps)) | 1, polyorder + 1 + polyorder % 2)
     if speed.size <= win:
-        return np.zeros(0, dtype=np.int64)
+        return np.zeros(0, dtype=np.int64), speed.copy()
     smooth = signal.savgol_filter(speed, win, polyorder)
     order = max(1, int(round(min_separation_s * fps / 2)))
-    return signal.argrelmin(smooth, order=order)[0].astype(np.int64)
+    frames = signal.argrelmin(smooth, order=order)[0]
+    if frames.size and min_prominence_frac > 0:
+        prominence = signal.peak_prominences(-smooth, frames)[0]
+        frames = frames[prominence >= min_prominence_frac * float(np.mean(smooth))]
+    return frames.astype(np.int64), smooth
+
+
+def snap_beats(beat_frames: np.ndarray, accents: np.ndarray, *, fraction: float) -> np.ndarray:
+    """Move each beat to the nearest accent frame within ``fraction`` of its beat period.
+
+    Beats induced as a regular grid (``pca_beats``) sit near, not on, the frames
+    where the movement visibly stops (speed minima, ``kinematic_beats``); the
+    renderer puts beat frames exactly on music beats, so snapping makes the stops
+    land on the music. A beat with no accent near it, or whose accent another beat
+    took, stays; beats stay strictly increasing.
+    """
+    beats = np.asarray(beat_frames, dtype=np.int64)
+    accents = np.asarray(accents, dtype=np.int64)
+    if fraction <= 0 or beats.size < 2 or accents.size == 0:
+        return beats
+    period = np.gradient(beats.astype(np.float64))
+    nearest = np.clip(np.searchsorted(accents, beats), 1, accents.size) - 1
+    candidates = np.stack([accents[nearest], accents[np.minimum(nearest + 1, accents.size - 1)]])
+    best = candidates[np.argmin(np.abs(candidates - beats), axis=0), np.arange(beats.size)]
+    snapped = np.where(np.abs(best - beats) <= fraction * period, best, beats)
+    # Two beats on one accent, or crossing: keep the original beats there.
+    bad = np.zeros(beats.size, dtype=bool)
+    clash = np.diff(snapped) <= 0
+    bad[:-1] |= clash
+    bad[1:] |= clash
+    return np.where(bad, beats, snapped)

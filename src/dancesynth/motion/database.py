@@ -45,6 +45,7 @@ class AnalysisConfig:
     """How clips are analysed and grouped when a database is built."""
 
     beat_method: str = "pca"        # "pca" (Xu's short-term PCA) or "kinematic" (speed minima)
+    snap_beats: float = 0.2         # PCA beats move to a speed minimum within this fraction of a beat (0: off)
     max_fps: float = 60.0           # faster captures are decimated to this rate
     tempo_bin_bpm: float = 40.0     # width of the tempo ranges that split a genre (§3.2)
     min_style_minutes: float = 1.0  # a tempo range with less motion joins its nearest neighbour
@@ -143,16 +144,20 @@ def analyse_clip(clip: MotionClip, config: AnalysisConfig = AnalysisConfig(), *,
     """
     sk = clip.skeleton
     g_rot, g_pos = fk(clip.local_rot, clip.root_pos, sk.offsets, sk.parents, clip.local_pos)
+    accents, _ = motion_beats.kinematic_beats(motion_beats.summed_speed(g_pos, clip.fps), clip.fps)
     if config.beat_method == "pca":
-        beats = motion_beats.pca_beats(g_pos, g_rot[:, 0], clip.fps, start_bpm=tempo_prior[0],
-                                       std_bpm=tempo_prior[1])
+        regular = motion_beats.pca_beats(g_pos, g_rot[:, 0], clip.fps, start_bpm=tempo_prior[0],
+                                         std_bpm=tempo_prior[1])
+        tempo_bpm = bpm_from_intervals(np.diff(regular) / clip.fps)  # the pulse, before snapping
+        beats = motion_beats.snap_beats(regular, accents, fraction=config.snap_beats)
     elif config.beat_method == "kinematic":
-        beats = motion_beats.kinematic_beats(motion_beats.summed_speed(g_pos, clip.fps), clip.fps)
+        beats = accents
+        tempo_bpm = bpm_from_intervals(np.diff(beats) / clip.fps)
     else:
         raise InputError(f"unknown beat method '{config.beat_method}' (use 'pca' or 'kinematic')")
     energy = kinetic_energy(g_pos, clip.fps, bone_masses(sk))
     contacts = foot_contacts(foot_points(clip, find_roles(sk), g_rot, g_pos), clip.fps)
-    return ClipAnalysis(beats, energy, contacts, bpm_from_intervals(np.diff(beats) / clip.fps))
+    return ClipAnalysis(beats, energy, contacts, tempo_bpm)
 
 
 # ---------------------------------------------------------------------------------------------
