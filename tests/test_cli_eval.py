@@ -109,3 +109,11 @@ def test_eval_bad_input(trumpet_dance, tmp_path):
     assert_clean_failure(run("eval", dance, tmp_path / "missing.ogg", "--json", out), out, "missing.ogg")
     assert_clean_failure(run("eval", dance, TRUMPET, "--plot", tmp_path / "plot.xyz"), tmp_path / "plot.xyz",
                          "plot")
+
+
+def test_bench_refuses_a_file_as_its_output_folder(tmp_path):
+    taken = tmp_path / "results"
+    taken.write_text("not a folder")
+    proc = run("bench", "--quick", "--out", taken)
+    assert proc.returncode == 2 and "is a file" in proc.stderr and "Traceback" not in proc.stderr
+    assert taken.read_text() == "not a folder"

@@ -247,6 +247,8 @@ def bench(quick, out_dir):
     """Benchmarks: synthesis time (Xu Fig. 4), scaling, quality table, beat tracking on generated songs."""
     from .eval.bench import format_bench, run_bench
 
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError(f"--out {out_dir} is a file; give a folder for bench.json")
     out_dir.mkdir(parents=True, exist_ok=True)
     result = run_bench(quick=quick, out_dir=out_dir, progress=lambda msg: click.echo(msg, err=True))
     click.echo(format_bench(result))

@@ -159,8 +159,10 @@ class GraphEngine:
         inten = np.asarray(intensity_db, dtype=np.float64)
         state = self.initial_state(seed, needed_beats=len(inten))
         t0 = time.perf_counter()
+        # The same objective as streaming (jump cost included) but over the whole song;
+        # the repeat penalty is a streaming memory and has no place in one global DP.
         path = search(self.graph, standardise(inten, inten.mean(), inten.std()), np.diff(beat_times_s),
-                      start_nodes=state.start_nodes, thc=0.0)
+                      start_nodes=state.start_nodes, thc=0.0, jump_cost=self.config.jump_cost)
         t1 = time.perf_counter()
         pieces = pieces_from_path(self.graph, path, np.asarray(beat_times_s, dtype=np.float64))
         _, frames = render(self.style, pieces, state.stitch, fps=self.fps,
