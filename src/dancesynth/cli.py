@@ -144,7 +144,7 @@ def styles(database):
               help="Folder to write the database to.")
 @click.option("--beats", type=click.Choice(["pca", "kinematic"]), default="pca", show_default=True,
               help="Motion beats by short-term PCA (Xu et al.) or by speed minima.")
-@click.option("--snap", type=click.FloatRange(0.0, 0.5), default=0.2, show_default=True,
+@click.option("--snap", type=click.FloatRange(0.0, 0.5), default=0.15, show_default=True,
               help="Move PCA beats to a speed minimum within this fraction of a beat (0: regular PCA beats).")
 @click.option("--manifest", type=click.Path(dir_okay=False, path_type=Path),
               help="A genres.toml mapping genres to file patterns (default: SOURCE/genres.toml or sub-folders).")

@@ -45,7 +45,7 @@ class AnalysisConfig:
     """How clips are analysed and grouped when a database is built."""
 
     beat_method: str = "pca"        # "pca" (Xu's short-term PCA) or "kinematic" (speed minima)
-    snap_beats: float = 0.2         # PCA beats move to a speed minimum within this fraction of a beat (0: off)
+    snap_beats: float = 0.15        # PCA beats move to a speed minimum within this fraction of a beat (0: off)
     max_fps: float = 60.0           # faster captures are decimated to this rate
     tempo_bin_bpm: float = 40.0     # width of the tempo ranges that split a genre (§3.2)
     min_style_minutes: float = 1.0  # a tempo range with less motion joins its nearest neighbour
