@@ -208,21 +208,7 @@ def dp_beat_track(onset_env: np.ndarray, fps: float, *, start_bpm: float = 120.0
         bpm = estimate_tempo(env, fps, start_bpm=start_bpm, std_bpm=std_bpm)
     if not (bpm > 0) or env.size < 2 or not np.any(env > 0):
         return np.zeros(0, dtype=np.int64), 0.0
-    period = max(60.0 * fps / bpm, 2.0)
-    local = beat_local_score(env, period)
-    backlink, cumscore = _dp(local, period, tightness)
-    beats = []
-    i = _last_beat(cumscore)
-    while i >= 0:
-        beats.append(i)
-        i = backlink[i]
-    frames = np.asarray(beats[::-1], dtype=np.int64)
-    # Beats before the first or after the last onset sit on nothing (librosa's
-    # trim=False does the same).
-    scored = np.flatnonzero(local > 0)
-    if scored.size:
-        frames = frames[(frames >= scored[0]) & (frames <= scored[-1])]
-    return frames, float(bpm)
+    return _track_with_curve(env, fps, np.float64(bpm), tightness), float(bpm)
 
 
 # Metrical-level check (``metrical_level``): on the generated ground-truth songs
@@ -301,8 +287,12 @@ def metrical_level(onset_env: np.ndarray, beat_frames: np.ndarray, bpm: np.ndarr
     return beat_factor[index]
 
 
-def _track_with_curve(env: np.ndarray, fps: float, bpm: np.ndarray, tightness: float) -> np.ndarray:
-    """Ellis' DP with the period of ``bpm`` (one tempo per frame); beats outside the onsets dropped."""
+def _track_with_curve(env: np.ndarray, fps: float, bpm, tightness: float) -> np.ndarray:
+    """Ellis' DP with the period of ``bpm`` (one tempo, or one per frame), backtracked from the last beat.
+
+    Beats before the first or after the last onset sit on nothing and are dropped
+    (librosa's ``trim=False`` does the same).
+    """
     period = np.maximum(60.0 * fps / bpm, 2.0)
     local = beat_local_score(env, float(np.median(period)))
     backlink, cumscore = _dp(local, period, tightness)
