@@ -255,6 +255,51 @@ def bench(quick, out_dir):
     click.echo(f"wrote {out_dir / 'bench.json'}")
 
 
+@cli.command()
+@click.argument("source")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=Path("live.bvh"),
+              show_default=True, help="BVH file that grows as the dance goes (a valid BVH after every segment).")
+@click.option("--segment-seconds", type=float, default=5.0, show_default=True, help="Length of a segment.")
+@click.option("--style", help="Style or genre to dance (default: chosen from the first segment's tempo).")
+@click.option("--fps", type=float, default=30.0, show_default=True, help="Frame rate of the output.")
+@click.option("--seed", type=int, default=None, help="Vary the dance between runs.")
+@click.option("--database", type=click.Path(file_okay=False, path_type=Path),
+              help="A database folder or a folder of BVH files (default: the bundled database).")
+@click.option("--fast", is_flag=True, help="Read a file as fast as it decodes instead of at real-time pace.")
+@click.option("-q", "--quiet", is_flag=True, help="Only the summary, no line per segment.")
+def stream(source, output, segment_seconds, style, fps, seed, database, fast, quiet):
+    """Dance to SOURCE as it arrives: an audio file (played at real-time pace), '-' for standard input,
+    or an http(s) URL of an audio stream. Motion is synthesised segment by segment (Xu et al.'s double
+    buffer) and appended to the BVH as it goes."""
+    from .io.bvh_writer import BVHStreamWriter
+    from .live.runtime import LiveConfig, run_live
+    from .live.sources import AudioSource
+
+    if output.suffix.lower() != ".bvh":
+        raise InputError(f"output {output} must end in .bvh")
+
+    def report(r):
+        if not quiet:
+            click.echo(f"segment {r.index + 1:3d}  heard {r.audio_end_s:7.2f} s  {r.beats:3d} beats  motion "
+                       f"{r.motion_start_s:6.2f}-{r.motion_end_s:6.2f} s  step {r.process_s * 1e3:6.1f} ms "
+                       f"({100 * r.process_s / r.segment_s:4.1f}% of {r.segment_s:g} s)"
+                       f"{'  LATE' if r.late else ''}  ready at {r.ready_s:6.2f} s")
+
+    config = LiveConfig(segment_s=segment_seconds, style=style, fps=fps, seed=seed, database=database)
+    with AudioSource(source, realtime=not fast) as src, BVHStreamWriter(output) as writer:
+        summary = run_live(src, writer.append, config=config, on_report=report, realtime=not fast)
+    if summary["frames"] == 0:
+        raise InputError(f"{source}: the stream ended before a single segment could be danced")
+    click.echo(f"style     {summary['style']}, {summary['tempo_bpm']:.1f} bpm")
+    click.echo(f"segments  {summary['segments']} of {segment_seconds:g} s, step median "
+               f"{summary['step_s_median'] * 1e3:.1f} ms, max {summary['step_s_max'] * 1e3:.1f} ms, "
+               f"{summary['late_segments']} late")
+    click.echo(f"latency   first motion ready {summary['first_motion_ready_s']:.2f} s after start "
+               f"({summary['first_audio_s']:.2f} s of audio heard)"
+               + (f"; {summary['silence_s']:.1f} s of stalls bridged" if summary["silence_s"] > 0 else ""))
+    click.echo(f"wrote     {output} ({summary['frames']} frames at {fps:g} fps)")
+
+
 def main(argv=None) -> int:
     _setup_env()
     try:

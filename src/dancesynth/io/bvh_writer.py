@@ -8,6 +8,7 @@ continuously over frames; the file is written atomically.
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -30,6 +31,16 @@ def _full_order(rot_axes: str) -> str:
 
 def format_bvh(clip: MotionClip, *, precision: int = 6) -> str:
     """BVH text of ``clip``: the skeleton's hierarchy, names, channel layout and End Sites.
+
+    See ``bvh_parts`` for the conventions.
+    """
+    hierarchy, rows = bvh_parts(clip, precision=precision)
+    return "\n".join([hierarchy, "MOTION", f"Frames: {clip.n_frames}", f"Frame Time: {1.0 / clip.fps:.8f}",
+                      *rows]) + "\n"
+
+
+def bvh_parts(clip: MotionClip, *, precision: int = 6) -> tuple[str, list[str]]:
+    """The HIERARCHY section (without a final newline) and one text row per frame.
 
     The root OFFSET is written as zero on the axes the root animates (its position
     is all in the channels), so Blender and three.js place the root alike. Euler
@@ -130,9 +141,54 @@ def format_bvh(clip: MotionClip, *, precision: int = 6) -> str:
         out.append(f"{pad}}}")
 
     emit(0, 0)
-    out.append("MOTION")
-    out.append(f"Frames: {n_f}")
-    out.append(f"Frame Time: {1.0 / clip.fps:.8f}")
     row = " ".join([f"%.{precision}f"] * values.shape[1])
-    out.extend(row % tuple(v) for v in values.tolist())
-    return "\n".join(out) + "\n"
+    return "\n".join(out), [row % tuple(v) for v in values.tolist()]
+
+
+class BVHStreamWriter:
+    """A BVH file that grows segment by segment and is a complete BVH after every ``append``.
+
+    The header is written with the first frames; ``Frames:`` has a fixed-width
+    field that is rewritten in place after the new rows are flushed, so a reader
+    that opens the file between appends sees every frame declared so far. The
+    hierarchy (and the root OFFSET) come from the first appended clip.
+    """
+
+    COUNT_WIDTH = 12
+
+    def __init__(self, path, *, precision: int = 6):
+        self.path = Path(path)
+        if not self.path.parent.is_dir():
+            raise InputError(f"cannot write {self.path}: folder {self.path.parent} does not exist (create it first)")
+        self.precision = precision
+        self.frames = 0
+        self._fh = None
+        self._count_at = 0
+
+    def append(self, clip: MotionClip) -> None:
+        if clip.n_frames == 0:
+            return
+        hierarchy, rows = bvh_parts(clip, precision=self.precision)
+        if self._fh is None:
+            self._fh = open(self.path, "w", encoding="utf-8", newline="\n")
+            self._fh.write(hierarchy + "\nMOTION\nFrames: ")
+            self._count_at = self._fh.tell()
+            self._fh.write(" " * self.COUNT_WIDTH + f"\nFrame Time: {1.0 / clip.fps:.8f}\n")
+        self._fh.seek(0, 2)
+        self._fh.write("\n".join(rows) + "\n")
+        self._fh.flush()
+        self.frames += clip.n_frames
+        self._fh.seek(self._count_at)
+        self._fh.write(f"{self.frames:<{self.COUNT_WIDTH}d}")
+        self._fh.flush()
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+    def __enter__(self) -> "BVHStreamWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,211 @@
+"""The double buffer of Xu et al.'s Fig. 1: segment n is synthesised while segment n+1 is heard.
+
+The main thread reads audio and feeds the streaming beat tracker; every
+``segment_s`` of audio it cuts a ``MusicSegment`` from the beats the tracker has
+made final and hands it to one worker thread, which runs the engine's pure
+``step`` and passes the frames to a sink. Steps run in order on that one worker,
+so the engine's state never needs a lock; reading never waits for synthesis.
+
+A stalled source does not stop the dancer: in real-time mode, when no audio has
+arrived for ``stall_s`` the runtime feeds silence at the wall clock's pace, the
+tracker carries the beat on at the last tempo, and the dance goes on (within the
+graph's synchronization capacity, which is infinite for a live stream: THC = inf).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from ..engines.beatgrid import choose_style
+from ..engines.graph.cache import load_graph
+from ..engines.graph.engine import EngineConfig, GraphEngine, MusicSegment
+from ..errors import InputError
+from ..motion.database import open_database
+from ..types import MotionClip
+from .beats import StreamingBeatTracker
+from .sources import AudioSource, wait_for_audio
+
+
+@dataclass(frozen=True)
+class LiveConfig:
+    segment_s: float = 5.0
+    style: str | None = None
+    fps: float = 30.0
+    seed: int | None = None
+    database: object = None            # a MotionDatabase, a path, or None for the bundled one
+    stall_s: float | None = None       # feed silence after this long without audio (default: one segment)
+    first_audio_timeout_s: float = 20.0
+    render: EngineConfig = field(default_factory=EngineConfig)
+
+
+@dataclass(frozen=True)
+class SegmentReport:
+    index: int
+    audio_end_s: float        # how much audio had been heard when the segment was cut
+    beats: int                # beat intervals in the segment
+    motion_start_s: float     # stream time of its first and last frame
+    motion_end_s: float
+    process_s: float          # time in the engine's step (search + render + foot lock)
+    segment_s: float
+    ready_s: float            # wall time since the first audio arrived when its frames reached the sink
+    silence_s: float          # silence fed for stalls so far
+
+    @property
+    def late(self) -> bool:
+        return self.process_s > self.segment_s
+
+
+class _Worker:
+    """Owns the engine state; runs steps in order on one thread."""
+
+    def __init__(self, engine: GraphEngine, seed, on_frames, on_report, t0: float, fps: float):
+        self.engine = engine
+        self.state = engine.initial_state(seed)
+        self.on_frames, self.on_report = on_frames, on_report
+        self.t0, self.fps = t0, fps
+        self.frames = 0
+        self.reports: list[SegmentReport] = []
+
+    def run(self, index: int, segment: MusicSegment, audio_end_s: float, segment_s: float, silence_s: float):
+        t = time.perf_counter()
+        self.state, out = self.engine.step(self.state, segment)
+        process_s = time.perf_counter() - t
+        clip = MotionClip(self.engine.style.skeleton, self.fps, out.root_pos, out.local_rot, contacts=out.contacts)
+        start = self.frames / self.fps
+        self.frames += clip.n_frames
+        self.on_frames(clip)
+        report = SegmentReport(index, audio_end_s, len(segment.intensity_db), start, self.frames / self.fps,
+                               process_s, segment_s, time.perf_counter() - self.t0, silence_s)
+        self.reports.append(report)
+        if self.on_report is not None:
+            self.on_report(report)
+
+
+def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, config: LiveConfig = LiveConfig(),
+             on_report: Callable[[SegmentReport], None] | None = None, realtime: bool = True,
+             stop: threading.Event | None = None) -> dict:
+    """Dance to ``source`` until it ends (or ``stop`` is set); frames go to ``on_frames`` segment by segment.
+
+    Returns a summary: style, tempo, segments, per-segment processing times,
+    the wall time at which the first motion was ready, how much silence was
+    fed for stalls.
+    """
+    if not config.segment_s > 0.5:
+        raise InputError(f"segment length must be more than 0.5 s, got {config.segment_s!r}")
+    db = open_database(config.database)
+    if config.style:
+        db.styles_of(config.style)  # an unknown style fails now, not after the first segment
+    stall_s = config.stall_s if config.stall_s is not None else config.segment_s
+    tracker = StreamingBeatTracker(source.sr)
+    first = wait_for_audio(source, config.first_audio_timeout_s)
+    t0 = time.perf_counter()  # latencies count from the first audio, as a listener hears it
+    tracker.push(first.samples)
+    last_audio = t0
+    silence_s = 0.0
+    heard_s = first.samples.size / source.sr
+    executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="dancesynth-step")
+    worker: _Worker | None = None
+    futures = []
+    prev_beat: float | None = None
+    next_cut = config.segment_s
+    index = 0
+    ended = False
+    tempo = 0.0
+    try:
+        while not ended:
+            if stop is not None and stop.is_set():
+                ended = True
+            else:
+                try:
+                    chunk = source.read(timeout=0.05)
+                except StopIteration:
+                    ended = True
+                    chunk = None
+                now = time.perf_counter()
+                if chunk is not None and chunk.samples.size:
+                    tracker.push(chunk.samples)
+                    heard_s += chunk.samples.size / source.sr
+                    last_audio = now
+                elif realtime and now - last_audio > stall_s:
+                    gap = now - last_audio
+                    tracker.push(np.zeros(int(gap * source.sr), dtype=np.float32))
+                    heard_s += gap
+                    silence_s += gap
+                    last_audio = now
+            if not ended and heard_s < next_cut:
+                continue
+            update = tracker.flush() if ended else tracker.update()
+            tempo = update.tempo_bpm or tempo
+            beats = np.asarray(update.beat_times_s, dtype=np.float64)
+            inten = np.asarray(update.intensity_db, dtype=np.float64)
+            next_cut = heard_s + config.segment_s
+            if worker is None:
+                if beats.size < 2 and not ended:
+                    continue  # not enough beats yet to start: keep listening
+                if beats.size == 0:
+                    break
+                style, _ = choose_style(db, tempo if tempo > 0 else 100.0, config.style)
+                graph, _ = load_graph(style)
+                worker = _Worker(GraphEngine(style, graph, config.render, fps=config.fps), config.seed,
+                                 on_frames, on_report, t0, config.fps)
+                beats, inten = _cover_start(beats, inten, tempo)
+                prev_beat = float(beats[0])
+                beats, inten = beats[1:], inten
+            if beats.size == 0 and not ended:
+                continue
+            times = np.concatenate(([prev_beat], beats))
+            end_s = None
+            if ended:
+                # The last segment renders to the end of what was heard: carry the beat on to it.
+                end_s = max(heard_s, float(times[-1]))
+                period = float(times[-1] - times[-2]) if times.size > 1 else (60.0 / tempo if tempo > 0 else 0.6)
+                n_after = int(np.ceil((end_s - times[-1]) / period - 1e-9)) if times.size < 2 or end_s > times[-1] else 0
+                n_after = max(n_after, 1 if times.size < 2 else 0)
+                times = np.concatenate((times, times[-1] + period * np.arange(1, n_after + 1)))
+                last = inten[-1] if inten.size else 0.0
+                inten = np.concatenate((inten, np.full(n_after, last)))
+            segment = MusicSegment(times, inten, remaining_beats=None, end_s=end_s)
+            futures.append(executor.submit(worker.run, index, segment, heard_s, config.segment_s, silence_s))
+            prev_beat = float(times[-1])
+            index += 1
+        for f in futures:
+            f.result()  # re-raise a failure of the worker here
+    finally:
+        executor.shutdown(wait=True, cancel_futures=True)
+    reports = worker.reports if worker else []
+    steps = [r.process_s for r in reports]
+    return {
+        "style": worker.engine.style.name if worker else None,
+        "tempo_bpm": tempo,
+        "heard_s": heard_s,
+        "silence_s": silence_s,
+        "segments": len(reports),
+        "frames": worker.frames if worker else 0,
+        "fps": config.fps,
+        "segment_s": config.segment_s,
+        "step_s_median": float(np.median(steps)) if steps else 0.0,
+        "step_s_max": float(np.max(steps)) if steps else 0.0,
+        "late_segments": sum(r.late for r in reports),
+        "first_motion_ready_s": reports[0].ready_s if reports else None,
+        "first_audio_s": reports[0].audio_end_s if reports else None,
+    }
+
+
+def _cover_start(beats: np.ndarray, inten: np.ndarray, tempo: float) -> tuple[np.ndarray, np.ndarray]:
+    """Beats extended backwards at the first beat period so the first interval starts at or before 0 s."""
+    period = float(beats[1] - beats[0]) if beats.size > 1 else (60.0 / tempo if tempo > 0 else 0.6)
+    n_before = int(np.ceil(max(beats[0], 0.0) / period - 1e-9)) if period > 0 else 0
+    first = inten[0] if inten.size else 0.0
+    # The first beat's interval (from the stream start) is replaced by regular ones.
+    head = beats[0] - period * np.arange(n_before, 0, -1)
+    times = np.concatenate((head, beats))
+    if n_before == 0:
+        times = np.concatenate(([beats[0] - period], beats))
+        n_before = 1
+    return times, np.concatenate((np.full(n_before, first), inten[1:] if inten.size == beats.size else inten))

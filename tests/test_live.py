@@ -1,0 +1,159 @@
+"""Live streaming as a user meets it: a growing BVH, real ffmpeg sources, a local HTTP server, stalls, garbage."""
+
+from __future__ import annotations
+
+import functools
+import http.server
+import io
+import os
+import re
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+import soundfile as sf
+
+import signals
+from conftest import BUNDLED_MUSIC, REPO
+from dancesynth.errors import InputError
+from dancesynth.io.bvh import read_bvh
+from dancesynth.io.bvh_writer import BVHStreamWriter
+from dancesynth.live.sources import AudioSource, wait_for_audio
+from test_cli import assert_clean_failure, run
+
+VIBE_ACE = BUNDLED_MUSIC / "Kevin_MacLeod_-_Vibe_Ace.ogg"
+TRUMPET = BUNDLED_MUSIC / "sorohanro_-_solo-trumpet-06.ogg"
+
+
+def test_stream_writer_keeps_a_complete_bvh_after_every_segment(tmp_path):
+    from dancesynth import dance
+
+    clip = dance(TRUMPET)
+    path = tmp_path / "live.bvh"
+    cuts = [0, 40, 41, 100, clip.n_frames]
+    with BVHStreamWriter(path) as writer:
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            part = type(clip)(clip.skeleton, clip.fps, clip.root_pos[a:b], clip.local_rot[a:b])
+            writer.append(part)
+            so_far = read_bvh(path)
+            assert so_far.n_frames == b
+            np.testing.assert_allclose(so_far.root_pos, clip.root_pos[:b], atol=1e-5)
+    final = read_bvh(path)
+    np.testing.assert_allclose(final.root_pos, clip.root_pos, atol=1e-5)
+
+
+def test_file_source_decodes_everything(tmp_path):
+    with AudioSource(str(TRUMPET), realtime=False) as src:
+        total = 0
+        while True:
+            try:
+                chunk = src.read(timeout=5.0)
+            except StopIteration:
+                break
+            if chunk is not None:
+                total += chunk.samples.size
+                assert chunk.samples.dtype == np.float32 and np.abs(chunk.samples).max() <= 1.0
+    assert total / src.sr == pytest.approx(sf.info(TRUMPET).duration, abs=0.05)
+
+
+def test_sources_refuse_what_they_cannot_play(tmp_path):
+    with pytest.raises(InputError, match="no such file"):
+        AudioSource(str(tmp_path / "missing.ogg"))
+    garbage = tmp_path / "noise.mp3"
+    garbage.write_bytes(np.random.default_rng(0).bytes(50_000))
+    with AudioSource(str(garbage), realtime=False) as src, pytest.raises(InputError, match="no audio"):
+        wait_for_audio(src, 10.0)
+
+
+def _beats_line_up(bvh_path, song, fps=30.0):
+    """Hit rate of the dance's kinematic beats on the song's offline beats, and the dance length."""
+    from dancesynth.eval.evaluate import evaluate
+    from dancesynth.music import analyze_music
+
+    clip = read_bvh(bvh_path)
+    music = analyze_music(path=song)
+    return evaluate(clip, music_beats_s=music.beat_times_s)["hit_rate"], clip.duration_s
+
+
+def test_stream_a_file_fast_gives_the_whole_dance(tmp_path):
+    out = tmp_path / "live.bvh"
+    proc = run("stream", TRUMPET, "--fast", "-o", out, "--segment-seconds", "2", timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "segment   1" in proc.stdout and "wrote" in proc.stdout
+    clip = read_bvh(out)
+    assert clip.duration_s == pytest.approx(sf.info(TRUMPET).duration, abs=0.2)
+
+
+@pytest.fixture
+def http_server(tmp_path):
+    """A plain HTTP server on 127.0.0.1 serving tmp_path (the way an Internet radio relays a file)."""
+    handler = functools.partial(_QuietHandler, directory=str(tmp_path))
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    yield f"http://127.0.0.1:{server.server_address[1]}"
+    server.shutdown()
+    server.server_close()
+
+
+class _QuietHandler(http.server.SimpleHTTPRequestHandler):
+    def log_message(self, *args):
+        pass
+
+
+@pytest.mark.slow
+def test_stream_over_http_at_real_time_pace(tmp_path, http_server):
+    excerpt = tmp_path / "excerpt.ogg"
+    subprocess.run(["ffmpeg", "-loglevel", "error", "-y", "-t", "14", "-i", str(VIBE_ACE), str(excerpt)], check=True)
+    out = tmp_path / "live.bvh"
+    t = time.perf_counter()
+    proc = run("stream", f"{http_server}/excerpt.ogg", "-o", out, "--segment-seconds", "3", timeout=120)
+    wall = time.perf_counter() - t
+    assert proc.returncode == 0, proc.stderr
+    assert wall >= 13.0  # it really went at the music's pace
+    ready = float(re.search(r"first motion ready ([0-9.]+) s", proc.stdout).group(1))
+    assert ready <= 3.0 + 0.2 + 0.5  # a segment, our 0.2 s, and ffmpeg's chunking slack
+    steps = [float(m) for m in re.findall(r"step\s+([0-9.]+) ms", proc.stdout)]
+    assert len(steps) >= 4 and max(steps) < 3000 and "LATE" not in proc.stdout
+    hit, duration = _beats_line_up(out, excerpt)
+    assert duration == pytest.approx(14.0, abs=0.3)
+    offline = tmp_path / "offline.bvh"
+    assert run("dance", excerpt, "-o", offline, "-q").returncode == 0
+    offline_hit, _ = _beats_line_up(offline, excerpt)
+    assert hit >= offline_hit - 0.1, (hit, offline_hit)
+
+
+def test_stream_from_stdin_survives_a_stall(tmp_path):
+    # 4 s of music, the source goes quiet for 5 s (2.5 segments), then 4 s more.
+    y, _ = signals.drum_loop(120, 8.0)
+    buf = io.BytesIO()
+    sf.write(buf, y, signals.SR, format="WAV", subtype="PCM_16")
+    data = buf.getvalue()
+    half = 44 + (len(data) - 44) // 2 // 2 * 2
+    out = tmp_path / "live.bvh"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(REPO / ".cache" / "numba")}
+    proc = subprocess.Popen([sys.executable, "-m", "dancesynth.cli", "stream", "-", "-o", str(out),
+                             "--segment-seconds", "2"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, env=env)
+    proc.stdin.write(data[:half])
+    proc.stdin.flush()
+    time.sleep(5.0)
+    stdout, stderr = proc.communicate(input=data[half:], timeout=60)
+    assert proc.returncode == 0, stderr.decode()
+    text = stdout.decode()
+    assert "stalls bridged" in text
+    clip = read_bvh(out)
+    assert clip.duration_s >= 8.0 + 2.0  # the dancer kept dancing through the stall
+
+
+def test_stream_bad_input(tmp_path):
+    out = tmp_path / "live.bvh"
+    garbage = tmp_path / "song.mp3"
+    garbage.write_bytes(np.random.default_rng(1).bytes(30_000))
+    assert_clean_failure(run("stream", garbage, "--fast", "-o", out), out, "no audio")
+    assert_clean_failure(run("stream", tmp_path / "missing.ogg", "-o", out), out, "missing.ogg")
+    assert_clean_failure(run("stream", TRUMPET, "-o", tmp_path / "live.txt"), tmp_path / "live.txt", ".bvh")
+    assert_clean_failure(run("stream", TRUMPET, "--fast", "--style", "tango", "-o", out), out, "unknown style")
