@@ -300,6 +300,30 @@ def stream(source, output, segment_seconds, style, fps, seed, database, fast, qu
     click.echo(f"wrote     {output} ({summary['frames']} frames at {fps:g} fps)")
 
 
+@cli.command()
+@click.argument("dance_path", metavar="DANCE.bvh", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("song", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
+              help="MP4 to write (default: the dance's name with .mp4, here).")
+@click.option("--width", type=int, default=960, show_default=True)
+@click.option("--height", type=int, default=540, show_default=True)
+@click.option("--fps", type=float, default=None, help="Video frame rate (default: the dance's).")
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+def render(dance_path, song, output, width, height, fps, quiet):
+    """Render DANCE.bvh as an MP4 video (H.264) with SONG muxed in sync (AAC)."""
+    from .export.video import render_video_files
+
+    output = output or Path(dance_path.stem + ".mp4")
+    progress = _Progress(enabled=not quiet and sys.stderr.isatty())
+    try:
+        info = render_video_files(dance_path, song, output, width=width, height=height, fps=fps,
+                                  progress=lambda done, total: progress("render", done, total))
+    finally:
+        progress.close()
+    click.echo(f"wrote {output}: {info['frames']} frames at {info['fps']:g} fps, {info['duration_s']:.1f} s, "
+               f"rendered in {info['seconds']:.1f} s")
+
+
 def main(argv=None) -> int:
     _setup_env()
     try:
