@@ -324,6 +324,21 @@ def render(dance_path, song, output, width, height, fps, quiet):
                f"rendered in {info['seconds']:.1f} s")
 
 
+@cli.command()
+@click.option("--host", default="127.0.0.1", show_default=True,
+              help="Address to listen on (127.0.0.1: this machine only; 0.0.0.0: every network).")
+@click.option("--port", type=click.IntRange(1, 65535), default=8000, show_default=True, help="Port to listen on.")
+@click.option("--database", type=click.Path(file_okay=False, path_type=Path),
+              help="A database folder or a folder of BVH files (default: the bundled database).")
+@click.option("--max-upload-mb", type=click.FloatRange(min=0.1), default=50.0, show_default=True,
+              help="Refuse uploaded songs larger than this.")
+def serve(host, port, database, max_upload_mb):
+    """A web page to watch the character dance: open http://HOST:PORT/ in a browser."""
+    from .web.server import serve as run_server
+
+    run_server(host=host, port=port, database=database, max_upload_mb=max_upload_mb)
+
+
 def main(argv=None) -> int:
     _setup_env()
     try:

@@ -6,6 +6,11 @@ each tracker in ``dancesynth.music.beats.TRACKERS`` runs through
 ``beat_tracking_scores`` (F-measure within 70 ms, continuity CMLt/AMLt, the first
 5 s skipped). Speed is audio duration over tracking time (onset envelope included),
 after one untimed warm-up call per tracker (librosa compiles its kernels then).
+
+The ``streaming`` row is the live tracker (``dancesynth.live.beats``) fed each song
+as a stream: 0.1 s chunks, ``update()`` every 5 s of audio (a segment), ``flush()``
+at the end; its beats are those a live dancer got, scored the same way. Its speed
+counts every push, update and flush.
 """
 
 from __future__ import annotations
@@ -26,6 +31,9 @@ TAG_GROUPS = {
     "no drums": lambda t: not t.get("drums", True),
 }
 SCORES = ("f_measure", "cmlc", "cmlt", "amlc", "amlt")
+STREAMING = "streaming"
+STREAM_CHUNK_S = 0.1
+STREAM_UPDATE_S = 5.0
 
 
 def _scorer():
@@ -50,13 +58,14 @@ def _scorer():
 
 def beat_tracking(cfg: BenchConfig, progress: Progress | None = None) -> dict:
     from ..io.audio import load_audio
+    from ..live.beats import LATENCY_S, stream_beats
     from ..motion.database import cache_dir
     from ..music import track_beats
     from ..music.beats import TRACKERS
     from .groundtruth import ground_truth_set
 
     score, scorer = _scorer()
-    trackers = list(cfg.trackers or sorted(TRACKERS))
+    trackers = list(cfg.trackers or sorted(TRACKERS) + [STREAMING])
     kwargs = {"quick": cfg.groundtruth_quick, "progress": progress}
     if cfg.groundtruth_specs is not None:
         kwargs["specs"] = list(cfg.groundtruth_specs)
@@ -71,17 +80,25 @@ def beat_tracking(cfg: BenchConfig, progress: Progress | None = None) -> dict:
     for name in trackers:
         if progress:
             progress(f"beat tracking: {name} on {len(songs)} songs")
-        track_beats(audio[0][0], audio[0][1], tracker=name)  # warm-up, untimed
+        if name == STREAMING:
+            def run(y, sr):
+                return stream_beats(y, sr, chunk_s=STREAM_CHUNK_S, update_every_s=STREAM_UPDATE_S)[0]
+        else:
+            def run(y, sr, name=name):
+                return track_beats(y, sr, tracker=name)[0]
+        run(*audio[0])  # warm-up, untimed
         per_song = []
         for song, (y, sr) in zip(songs, audio):
             t = time.perf_counter()
-            est, _, _ = track_beats(y, sr, tracker=name)
+            est = run(y, sr)
             secs = time.perf_counter() - t
             s = {k: float(v) for k, v in score(song.beats_s, est).items()}
             per_song.append({"song": song.name, "tags": dict(song.tags), "duration_s": len(y) / sr,
                              "time_s": secs, **s})
         results[name] = {"mean": _summary(per_song), "songs": per_song}
+    streaming = {"latency_s": LATENCY_S, "chunk_s": STREAM_CHUNK_S, "update_every_s": STREAM_UPDATE_S}
     return {"trackers": trackers, "songs": [s.name for s in songs], "scorer": scorer,
+            **({"streaming": streaming} if STREAMING in trackers else {}),
             "groups": {g: sum(1 for s in songs if pred(s.tags)) for g, pred in TAG_GROUPS.items()},
             "results": results}
 
@@ -106,9 +123,13 @@ def format_beat_tracking(s: dict) -> str:
     rows = [[name, r["mean"]["f_measure"], r["mean"]["cmlt"], r["mean"]["amlt"], r["mean"]["speed_x_realtime"]]
             + [r["mean"][f"f_{g}"] for g in groups] for name, r in s["results"].items()]
     counts = ", ".join(f"{g} {n}" for g, n in s["groups"].items())
+    notes = [f"F within 70 ms, continuity within 17.5% of the beat, first 5 s skipped; scored by {s['scorer']}",
+             f"songs per group: {counts} (- : no song in the group)"]
+    if "streaming" in s:
+        st = s["streaming"]
+        notes.append(f"streaming: the live tracker fed {st['chunk_s']:g} s chunks and updated every "
+                     f"{st['update_every_s']:g} s; a beat is given once {st['latency_s']:g} s old (its latency)")
     return table(
         f"Beat tracking on {len(s['songs'])} generated songs with exact beats (MIDI rendered by fluidsynth)",
         ["tracker", "F", "CMLt", "AMLt", "x real time"] + [f"F {g}" for g in groups], rows,
-        [0, 3, 3, 3, 0] + [3] * len(groups),
-        notes=[f"F within 70 ms, continuity within 17.5% of the beat, first 5 s skipped; scored by {s['scorer']}",
-               f"songs per group: {counts} (- : no song in the group)"])
+        [0, 3, 3, 3, 0] + [3] * len(groups), notes=notes)

@@ -1,0 +1,327 @@
+// The dancesynth page: ask the server for a dance, play the song, pose the character
+// from the audio element's clock (so seeking and pausing keep motion and music in sync),
+// and flash a ring on the floor on every music beat.
+import * as THREE from 'three';
+import { BVHLoader } from 'three/addons/loaders/BVHLoader.js';
+import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+
+const $ = (id) => document.getElementById(id);
+const audio = $('audio');
+const statusLine = $('status');
+// What the page is doing, for people debugging it and for the browser test.
+const state = (window.dancesynth = { state: 'loading', error: null, timings: {}, frames: 0, beats: 0 });
+
+function setStatus(text, isError = false) {
+	statusLine.textContent = text;
+	statusLine.classList.toggle('error', isError);
+}
+
+// ---- scene ----------------------------------------------------------------------------
+const canvas = $('view');
+const renderer = new THREE.WebGLRenderer({ canvas, antialias: true });
+renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
+const scene = new THREE.Scene();
+scene.background = new THREE.Color(0x1d2028);
+const camera = new THREE.PerspectiveCamera(45, 1, 0.05, 100);
+camera.position.set(2.2, 1.7, 3.6);
+const controls = new OrbitControls(camera, canvas);
+controls.target.set(0, 0.95, 0);
+controls.update();
+scene.add(new THREE.HemisphereLight(0xffffff, 0x404050, 2.0));
+const sun = new THREE.DirectionalLight(0xffffff, 1.5);
+sun.position.set(3, 6, 4);
+scene.add(sun);
+const grid = new THREE.GridHelper(10, 20, 0x59606e, 0x3a3f4b); // lines every 0.5 m
+scene.add(grid);
+
+const ring = new THREE.Mesh(
+	new THREE.RingGeometry(0.55, 0.7, 64),
+	new THREE.MeshBasicMaterial({ color: 0x4fc3f7, transparent: true, opacity: 0.15, side: THREE.DoubleSide }),
+);
+ring.rotation.x = -Math.PI / 2;
+ring.position.y = 0.002;
+scene.add(ring);
+
+const figureMaterial = new THREE.MeshLambertMaterial({ color: 0xff8c1a });
+const limbGeometry = new THREE.CylinderGeometry(1, 1, 1, 10); // scaled per bone
+const jointGeometry = new THREE.SphereGeometry(1, 12, 8);
+
+let dance = null; // { root, bones, limbs, mixer, action, duration, beats, hips }
+
+function resize() {
+	const w = canvas.clientWidth, h = canvas.clientHeight;
+	if (w && h && (canvas.width !== Math.round(w * renderer.getPixelRatio()) || camera.aspect !== w / h)) {
+		renderer.setSize(w, h, false);
+		camera.aspect = w / h;
+		camera.updateProjectionMatrix();
+	}
+}
+
+function buildFigure(bvhText) {
+	const result = new BVHLoader().parse(bvhText);
+	const bones = result.skeleton.bones;
+	const root = bones[0];
+	const group = new THREE.Group();
+	group.add(root);
+	const limbs = [];
+	for (const bone of bones) {
+		const parent = bone.parent;
+		if (!parent || !parent.isBone) continue;
+		const length = bone.position.length();
+		if (length < 1e-3) continue;
+		const radius = bone.name === 'ENDSITE' ? 0.03 : Math.min(0.05, Math.max(0.02, length * 0.12));
+		const mesh = new THREE.Mesh(limbGeometry, figureMaterial);
+		mesh.scale.set(radius, length, radius);
+		limbs.push({ mesh, bone, parent });
+		group.add(mesh);
+	}
+	const head = bones.find((b) => /head/i.test(b.name));
+	if (head) {
+		const sphere = new THREE.Mesh(jointGeometry, figureMaterial);
+		sphere.scale.setScalar(0.1);
+		limbs.push({ mesh: sphere, bone: head, parent: null });
+		group.add(sphere);
+	}
+	const mixer = new THREE.AnimationMixer(root);
+	const action = mixer.clipAction(result.clip);
+	action.setLoop(THREE.LoopOnce, 1);
+	action.clampWhenFinished = true;
+	action.play();
+	return { group, root, bones, limbs, mixer, action, duration: result.clip.duration };
+}
+
+const _a = new THREE.Vector3(), _b = new THREE.Vector3(), _dir = new THREE.Vector3();
+const _up = new THREE.Vector3(0, 1, 0);
+
+function poseAt(t) {
+	const d = dance;
+	t -= d.offset || 0; // a live figure holds only the last part of the stream
+	// Set the action's time directly: the audio clock is the only clock.
+	d.action.paused = false;
+	d.action.enabled = true;
+	d.action.time = Math.min(Math.max(t, 0), Math.max(d.duration - 1e-4, 0));
+	d.mixer.update(0);
+	d.group.updateMatrixWorld(true);
+	for (const { mesh, bone, parent } of d.limbs) {
+		bone.getWorldPosition(_b);
+		if (!parent) {
+			mesh.position.copy(_b).addScaledVector(_up, 0.08);
+			continue;
+		}
+		parent.getWorldPosition(_a);
+		_dir.subVectors(_b, _a);
+		const len = _dir.length();
+		mesh.position.addVectors(_a, _b).multiplyScalar(0.5);
+		if (len > 1e-6) mesh.quaternion.setFromUnitVectors(_up, _dir.divideScalar(len));
+	}
+	// Follow the dancer: the ring stays under the hips, the camera keeps its offset.
+	d.root.getWorldPosition(_a);
+	ring.position.x = _a.x;
+	ring.position.z = _a.z;
+	const dx = (_a.x - controls.target.x) * 0.05, dz = (_a.z - controls.target.z) * 0.05;
+	controls.target.x += dx; controls.target.z += dz;
+	camera.position.x += dx; camera.position.z += dz;
+}
+
+// Index of the last beat at or before t (binary search).
+function lastBeat(beats, t) {
+	let lo = 0, hi = beats.length - 1, found = -1;
+	while (lo <= hi) {
+		const mid = (lo + hi) >> 1;
+		if (beats[mid] <= t) { found = mid; lo = mid + 1; } else hi = mid - 1;
+	}
+	return found;
+}
+
+function frame() {
+	resize();
+	if (live && live.t0 !== null) {
+		live.time = live.ctx.currentTime - live.t0;
+		state.live.time = live.time;
+	}
+	if (dance) {
+		const t = live ? Math.max(live.time, 0) : audio.currentTime || 0;
+		poseAt(t);
+		const i = lastBeat(dance.beats, t);
+		const since = i >= 0 ? t - dance.beats[i] : Infinity;
+		const pulse = Math.exp(-since / 0.12); // 1 on the beat, fading over ~0.3 s
+		ring.material.opacity = 0.15 + 0.8 * pulse;
+		ring.material.color.setHSL(0.55 - 0.1 * pulse, 0.9, 0.45 + 0.3 * pulse);
+		ring.scale.setScalar(1 + 0.25 * pulse);
+	}
+	controls.update();
+	renderer.render(scene, camera);
+	requestAnimationFrame(frame);
+}
+
+// ---- controls -------------------------------------------------------------------------
+async function getJSON(url, options) {
+	const response = await fetch(url, options);
+	let body = null;
+	try { body = await response.json(); } catch { body = null; }
+	if (!response.ok) throw new Error((body && body.error) || `${response.status} ${response.statusText}`);
+	return body;
+}
+
+async function loadChoices() {
+	const [songs, styles] = await Promise.all([getJSON('/api/songs'), getJSON('/api/styles')]);
+	for (const s of songs.songs) $('song').add(new Option(s.title, s.name));
+	for (const s of styles.styles) {
+		const tempo = `${Math.round(s.tempo_min_bpm)}-${Math.round(s.tempo_max_bpm)} bpm`;
+		$('style').add(new Option(`${s.name} (${s.genre}, ${tempo})`, s.name));
+	}
+	if (songs.songs.length) $('song').value = songs.songs[0].name;
+}
+
+async function requestDance(event) {
+	event.preventDefault();
+	const form = new FormData();
+	const file = $('file').files[0];
+	if (file && !$('song').value) form.append('audio', file);
+	else if ($('song').value) form.append('song', $('song').value);
+	else if (file) form.append('audio', file);
+	else { setStatus('Pick a song or choose an audio file.', true); return; }
+	form.append('style', $('style').value);
+	form.append('seed', $('seed').value);
+	$('dance').disabled = true;
+	state.state = 'dancing';
+	setStatus('Listening to the music and choreographing…');
+	const t0 = performance.now();
+	try {
+		const result = await getJSON('/api/dance', { method: 'POST', body: form });
+		state.timings.dance_ms = performance.now() - t0;
+		stopLive();
+		if (dance) scene.remove(dance.group);
+		dance = buildFigure(result.bvh);
+		dance.beats = result.beats;
+		scene.add(dance.group);
+		audio.pause();
+		audio.src = result.audio_url;
+		audio.currentTime = 0;
+		state.frames = result.frames;
+		state.beats = result.beats.length;
+		state.state = 'ready';
+		setStatus(`${result.style} at ${result.tempo_bpm.toFixed(1)} bpm, ${result.beats.length} beats, ` +
+			`${result.duration_s.toFixed(1)} s — press play` +
+			(result.default_tempo ? ' (no clear beat: a steady default tempo)' : ''));
+		audio.play().catch(() => {}); // browsers may refuse autoplay; the play button works
+	} catch (err) {
+		state.state = 'error';
+		state.error = String(err.message || err);
+		setStatus(`Could not dance: ${state.error}`, true);
+	} finally {
+		$('dance').disabled = false;
+	}
+}
+
+// ---- live mode: the server dances to a stream; the page plays its audio after a delay ------
+// The server relays the stream's audio as 16-bit PCM, the BVH hierarchy once, and every
+// segment's frames and beats. Audio is scheduled with Web Audio `delay_s` after it arrives,
+// the delay the double buffer needs for the motion of each moment to be here before it is heard.
+let live = null;
+const KEEP_S = 60; // the live figure holds the last minute of motion
+
+function stopLive() {
+	if (!live) return;
+	live.ws.onmessage = live.ws.onclose = null;
+	live.ws.close();
+	live.ctx.close().catch(() => {});
+	live = null;
+}
+
+function liveAudio(buffer) {
+	const pcm = new Int16Array(buffer);
+	if (!pcm.length) return;
+	if (live.t0 === null) live.t0 = live.ctx.currentTime + live.delay;
+	const b = live.ctx.createBuffer(1, pcm.length, live.sr);
+	const ch = b.getChannelData(0);
+	for (let i = 0; i < pcm.length; i++) ch[i] = pcm[i] / 32768;
+	const src = live.ctx.createBufferSource();
+	src.buffer = b;
+	src.connect(live.ctx.destination);
+	src.start(Math.max(live.t0 + live.samples / live.sr, live.ctx.currentTime));
+	live.samples += pcm.length;
+	state.live.heard_s = live.samples / live.sr;
+}
+
+function liveFrames(startFrame, rows) {
+	live.rows.push(...rows);
+	const drop = live.rows.length - Math.round(KEEP_S * live.fps);
+	if (drop > 0) { live.rows.splice(0, drop); live.base += drop; }
+	const text = `${live.hierarchy}\nMOTION\nFrames: ${live.rows.length}\nFrame Time: ${(1 / live.fps).toFixed(8)}\n` +
+		live.rows.join('\n') + '\n';
+	if (dance) scene.remove(dance.group);
+	dance = buildFigure(text);
+	dance.offset = live.base / live.fps;
+	dance.beats = live.beats;
+	scene.add(dance.group);
+	state.live.frames = startFrame + rows.length;
+}
+
+function startLive(event) {
+	event.preventDefault();
+	stopLive();
+	audio.pause();
+	const url = $('live-url').value.trim();
+	if (!url) { setStatus('Give the URL of a stream (http or https).', true); return; }
+	const params = new URLSearchParams({ url, segment_s: $('live-segment').value || '5', style: $('style').value,
+		seed: $('seed').value });
+	const ws = new WebSocket(`${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws/live?${params}`);
+	ws.binaryType = 'arraybuffer';
+	live = { ws, ctx: new AudioContext(), t0: null, sr: 22050, samples: 0, fps: 30, delay: 10, hierarchy: null,
+		rows: [], base: 0, beats: [], time: 0 };
+	state.live = { state: 'connecting', frames: 0, beats: 0, time: 0, heard_s: 0, error: null };
+	setStatus('Connecting to the stream…');
+	const mine = live;
+	ws.onmessage = (ev) => {
+		if (live !== mine) return;
+		if (typeof ev.data !== 'string') { liveAudio(ev.data); return; }
+		const m = JSON.parse(ev.data);
+		if (m.type === 'start') {
+			live.sr = m.sr; live.delay = m.delay_s;
+			state.live.state = 'listening';
+			setStatus(`Listening; the dance starts ${m.delay_s.toFixed(1)} s after the music arrives…`);
+		} else if (m.type === 'hierarchy') {
+			live.hierarchy = m.bvh; live.fps = m.fps;
+		} else if (m.type === 'frames') {
+			liveFrames(m.start_frame, m.rows);
+			state.live.state = 'dancing';
+			setStatus(`Live: ${(state.live.frames / live.fps).toFixed(1)} s of dance ready, ` +
+				`${state.live.heard_s.toFixed(1)} s heard, playing ${live.delay.toFixed(1)} s behind the stream`);
+		} else if (m.type === 'beats') {
+			live.beats.push(...m.beats);
+			state.live.beats = live.beats.length;
+		} else if (m.type === 'end') {
+			state.live.state = 'ended';
+			setStatus(`The stream ended: ${m.summary.segments} segments, style ${m.summary.style}; ` +
+				'the dance plays to the end of the music');
+		} else if (m.type === 'error') {
+			state.live.state = 'error';
+			state.live.error = m.error;
+			setStatus(`Live: ${m.error}`, true);
+		}
+	};
+	ws.onclose = () => {
+		if (live === mine && !['ended', 'error'].includes(state.live.state)) {
+			state.live.state = 'closed';
+			setStatus('The connection to the server closed.', true);
+		}
+	};
+}
+
+$('live-controls').addEventListener('submit', startLive);
+$('stop-live').addEventListener('click', () => { stopLive(); setStatus('Stopped.'); });
+audio.addEventListener('play', () => { if (live) stopLive(); });
+$('controls').addEventListener('submit', requestDance);
+$('file').addEventListener('change', () => { if ($('file').files.length) $('song').value = ''; });
+const tLoad = performance.now();
+loadChoices().then(() => {
+	state.timings.choices_ms = performance.now() - tLoad;
+	state.state = 'idle';
+	setStatus('Pick a song (or a file) and press Dance.');
+}).catch((err) => {
+	state.state = 'error';
+	state.error = String(err.message || err);
+	setStatus(`Could not reach the server: ${state.error}`, true);
+});
+requestAnimationFrame(frame);
