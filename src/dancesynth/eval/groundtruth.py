@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import shutil
 import subprocess
 from dataclasses import asdict, dataclass, field
@@ -30,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io.files import atomic_output
+from ..io.files import atomic_output, atomic_path
 
 TICKS_PER_BEAT = 480
 RENDER_SR = 22050
@@ -267,17 +266,12 @@ def render_midi(midi_path: Path, wav_path: Path, *, soundfont: Path | None = Non
     if exe is None:
         raise InputError("fluidsynth is not installed; install it: apt-get install fluidsynth timgm6mb-soundfont")
     soundfont = soundfont or find_soundfont()
-    wav_path = Path(wav_path)
-    tmp = wav_path.with_name(f".{wav_path.name}.part")
-    cmd = [exe, "-n", "-i", "-q", "-R", "0", "-C", "0", "-g", "0.6", "-r", str(sr), "-T", "wav",
-           "-F", str(tmp), str(soundfont), str(midi_path)]
-    try:
+    with atomic_path(wav_path) as tmp:
+        cmd = [exe, "-n", "-i", "-q", "-R", "0", "-C", "0", "-g", "0.6", "-r", str(sr), "-T", "wav",
+               "-F", str(tmp), str(soundfont), str(midi_path)]
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
-        if done.returncode != 0 or not tmp.is_file() or tmp.stat().st_size < 1000:
+        if done.returncode != 0 or tmp.stat().st_size < 1000:
             raise InputError(f"fluidsynth could not render {midi_path}: {done.stderr.strip()[-300:]}")
-        os.replace(tmp, wav_path)
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 def render_song(spec: SongSpec, out_dir: Path, *, soundfont: Path | None = None) -> GroundTruthSong:

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DanceSynthError, InputError
+from ..io.files import atomic_path
 from ..types import MotionClip
 
 MAX_LONG_SIDE = 3840          # 4K UHD: 3840x2160, either orientation
@@ -70,7 +71,7 @@ def render_video(dance: MotionClip, song_path: Path | None, out_path: Path, *, w
     from .render import FrameRenderer  # PIL and the scene only when a video is made
 
     renderer = FrameRenderer(dance, width, height)
-    with _atomic_path(out_path) as tmp:
+    with atomic_path(out_path) as tmp:
         cmd = ffmpeg_command(ffmpeg, tmp, width=width, height=height, fps=fps_out, n_frames=n, song=song)
         _encode(cmd, renderer.frames(source), n, progress)
     return {"frames": n, "duration_s": n / fps_out, "seconds": time.perf_counter() - t0, "fps": fps_out,
@@ -270,25 +271,3 @@ def _ffmpeg_failure(stderr: str, rc: int) -> str:
     if "Unknown encoder 'libx264'" in stderr or "Encoder not found" in stderr:
         hint = "this ffmpeg lacks the libx264 encoder: install a full build (e.g. `sudo apt install ffmpeg`)"
     return f"ffmpeg failed to write the video ({why}); {hint}"
-
-
-@contextlib.contextmanager
-def _atomic_path(path: Path):
-    """A temporary path next to ``path``, moved into place only if the block succeeds."""
-    parent = path.parent if str(path.parent) else Path(".")
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=parent)
-    except OSError as exc:
-        raise InputError(f"cannot write {path}: {exc.strerror} in folder {parent}; check its permissions") from None
-    os.close(fd)
-    try:
-        yield Path(tmp)
-        # mkstemp makes the file private (0600); give it the permissions a plain open() would.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise

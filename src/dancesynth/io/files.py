@@ -11,16 +11,20 @@ from ..errors import InputError
 
 
 @contextlib.contextmanager
-def atomic_output(path, mode: str = "w", **open_kwargs):
-    """Open a temporary file next to ``path``; move it into place only if the block succeeds."""
+def atomic_path(path):
+    """A temporary path next to ``path`` (for a tool such as ffmpeg to write); moved into place only
+    if the block succeeds, removed otherwise."""
     path = Path(path)
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
         raise InputError(f"cannot write {path}: folder {parent} does not exist (create it first)")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=parent)
     try:
-        with os.fdopen(fd, mode, **open_kwargs) as fh:
-            yield fh
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=parent)
+    except OSError as exc:
+        raise InputError(f"cannot write {path}: {exc.strerror} in folder {parent}; check its permissions") from None
+    os.close(fd)
+    try:
+        yield Path(tmp)
         # mkstemp makes the file private (0600); give it the permissions a plain open() would.
         umask = os.umask(0)
         os.umask(umask)
@@ -30,3 +34,10 @@ def atomic_output(path, mode: str = "w", **open_kwargs):
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+@contextlib.contextmanager
+def atomic_output(path, mode: str = "w", **open_kwargs):
+    """Open a temporary file next to ``path``; move it into place only if the block succeeds."""
+    with atomic_path(path) as tmp, open(tmp, mode, **open_kwargs) as fh:
+        yield fh

@@ -63,6 +63,7 @@ MIN_GAP_PERIODS = 0.5
 # off-beats or a changed metrical level 7-47; the bundled songs' ambiguous phases < 3.
 REPHASE_MIN_BEATS = 4
 REPHASE_GAIN = 4.0
+DUE_EARLY_PERIODS = 0.15   # an update runs the analysis again from this far before the next beat seen
 _ANCHOR = 1e6            # local score of the anchor: every kept path starts there
 _HALF = N_FFT // 2
 _DELAY = 1 + N_FFT // (2 * HOP_LENGTH)   # onset_envelope's shift: frame i rises from db[i-3] to db[i-2]
@@ -158,7 +159,7 @@ class StreamingBeatTracker:
         self._strength = np.zeros(16)   # onset strength of the last real beats given
         self._given = np.full(64, -1, dtype=np.int64)  # DP frames of the last beats given, the last last
         self._gain, self._rephasing = 0.0, False    # the last re-phase comparison; did it re-phase
-        self._tempo_bpm, self._loud_db, self._loud_at = 0.0, -np.inf, 0.0
+        self._tempo_bpm, self._loud_db, self._loud_at, self._next_due = 0.0, -np.inf, 0.0, -np.inf
 
     @property
     def heard_s(self) -> float:
@@ -265,8 +266,9 @@ class StreamingBeatTracker:
         """New beat times (s, after latency correction) up to ``horizon`` and whether each was heard."""
         none = (np.zeros(0), np.zeros(0, dtype=bool))
         # No beat can be due yet (the DP's shortest interval is half a period): skip the analysis.
+        # Nor before the next beat of the last analysis's path (less DUE_EARLY_PERIODS).
         soonest = min(self._period_s(), 60.0 / self._tempo_bpm if self._tempo_bpm else np.inf)
-        if horizon <= self._last_s + MIN_GAP_PERIODS * 0.9 * soonest:
+        if horizon <= max(self._last_s + MIN_GAP_PERIODS * 0.9 * soonest, -np.inf if final else self._next_due):
             return none
         env, f0 = self.envelope()
         sounding = self._sounding(env.size)
@@ -284,6 +286,8 @@ class StreamingBeatTracker:
             typical = float(np.median(known)) if known.size >= 4 else window_typical
             dead |= peak < TRAILING_BEAT_FRACTION * typical
             ok = sounding[frames] & (times <= horizon)
+            later = times[times > horizon]
+            self._next_due = later[0] - DUE_EARLY_PERIODS * period[-1] if later.size else -np.inf
             strength = peak[frames]
             if final:   # drop the run of last beats on no onset (a final chord's decay), as offline
                 weak = strength < TRAILING_BEAT_FRACTION * typical
@@ -348,9 +352,9 @@ class StreamingBeatTracker:
             bpm = bpm * factor
             period = np.maximum(60.0 * FPS / bpm, 2.0)
             local = beat_local_score(env64, float(np.median(period)))
+            first = _path(local, period)
         anchor = self._given[-1] - f0
-        free = _path(local, period)
-        frames = free = free[free >= np.argmax(local > 0)]
+        frames = free = first[first >= np.argmax(local > 0)]
         if self._last_real and 0 <= anchor < env.size - 1:
             frames = _path(local, period, anchor=anchor)
             given = self._given[self._given >= f0][-2 * REPHASE_MIN_BEATS:] - f0
