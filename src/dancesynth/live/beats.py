@@ -44,11 +44,11 @@ from ..music.intensity import rms_db
 from ..music.onset import ANALYSIS_SR, HOP_LENGTH, N_FFT, N_MELS, mel_filterbank, power_to_db
 
 FPS = ANALYSIS_SR / HOP_LENGTH
-# Beats are given once they are this far in the past (the tracker's latency),
-# chosen by measurement (docs/beat-tracking.md, "Streaming").
+# Beats are given once this far in the past (the latency). Mean F on the 25 generated songs:
+# updated every 5 s, 0.999 at 0-0.5 s, 1.000 from 1 s; every 0.1 s, 0.94/0.95/0.97/0.98/1.00 at 0.5/1/1.5/2/3 s.
 LATENCY_S = 1.5
 TIGHTNESS = 100.0
-MIN_WINDOW_S = 2.0      # less audio than this has no tempo to speak of
+MIN_WINDOW_S = 1.0      # less audio than this has no tempo to speak of (the first beats wait)
 # Silence: SILENCE_BELOW_LOUD_DB under the recent loud level (95th percentile of the
 # window's 2048-sample RMS levels, decaying DECAY_DB_PER_S), or under SILENCE_FLOOR_DB.
 SILENCE_BELOW_LOUD_DB = 50.0
@@ -264,16 +264,14 @@ class StreamingBeatTracker:
 
     def _next_beats(self, horizon: float, final: bool) -> tuple[np.ndarray, np.ndarray]:
         """New beat times (s, after latency correction) up to ``horizon`` and whether each was heard."""
-        none = (np.zeros(0), np.zeros(0, dtype=bool))
-        # No beat can be due yet (the DP's shortest interval is half a period): skip the analysis.
-        # Nor before the next beat of the last analysis's path (less DUE_EARLY_PERIODS).
+        # Skip the analysis while no beat can be due: the DP's shortest interval is half a
+        # period, and the last analysis saw the next beat later (less DUE_EARLY_PERIODS).
         soonest = min(self._period_s(), 60.0 / self._tempo_bpm if self._tempo_bpm else np.inf)
         if horizon <= max(self._last_s + MIN_GAP_PERIODS * 0.9 * soonest, -np.inf if final else self._next_due):
-            return none
+            return np.zeros(0), np.zeros(0, dtype=bool)
         env, f0 = self.envelope()
         sounding = self._sounding(env.size)
-        dead = ~sounding
-        track = None
+        dead, track = ~sounding, None
         if env.size >= MIN_WINDOW_S * FPS and np.any(env[sounding] > 0):
             track = self._track(env, f0)
         out, real, previous = [], [], self._last_s
@@ -301,16 +299,14 @@ class StreamingBeatTracker:
                     n = max(int(round((t - previous) / p)), 2)
                     out.extend(previous + (t - previous) * np.arange(1, n) / n)
                     real.extend([False] * (n - 1))
-                out.append(t)
-                real.append(True)
+                out, real = out + [t], real + [True]
                 previous = t
                 self._strength = np.concatenate((self._strength[1:], [x]))
         elif env.size < MIN_WINDOW_S * FPS and np.any(sounding):
-            return none     # music has begun, too little of it to know its tempo
+            return np.zeros(0), np.zeros(0, dtype=bool)     # music has begun, too little to know its tempo
         if not final:
             tail = self._extrapolate(previous, horizon, dead, f0, None if track is None else 60.0 / bpm_now)
-            out.extend(tail)
-            real.extend([False] * len(tail))
+            out, real = out + list(tail), real + [False] * len(tail)
         return np.asarray(out, dtype=np.float64), np.asarray(real, dtype=bool)
 
     def _extrapolate(self, previous: float, horizon: float, dead: np.ndarray, f0: int,
