@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-import functools
-import http.server
 import io
 import os
 import re
 import subprocess
 import sys
-import threading
 import time
 
 import numpy as np
@@ -18,6 +15,7 @@ import soundfile as sf
 
 import signals
 from conftest import BUNDLED_MUSIC, REPO
+from servers import http_folder
 from dancesynth.errors import InputError
 from dancesynth.io.bvh import read_bvh
 from dancesynth.io.bvh_writer import BVHStreamWriter
@@ -89,19 +87,8 @@ def test_stream_a_file_fast_gives_the_whole_dance(tmp_path):
 
 @pytest.fixture
 def http_server(tmp_path):
-    """A plain HTTP server on 127.0.0.1 serving tmp_path (the way an Internet radio relays a file)."""
-    handler = functools.partial(_QuietHandler, directory=str(tmp_path))
-    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    yield f"http://127.0.0.1:{server.server_address[1]}"
-    server.shutdown()
-    server.server_close()
-
-
-class _QuietHandler(http.server.SimpleHTTPRequestHandler):
-    def log_message(self, *args):
-        pass
+    with http_folder(tmp_path) as url:
+        yield url
 
 
 @pytest.mark.slow

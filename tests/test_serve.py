@@ -2,12 +2,9 @@
 
 from __future__ import annotations
 
-import functools
 import http.client
-import http.server
 import json
 import shutil
-import socket
 import subprocess
 import threading
 import time
@@ -19,56 +16,27 @@ import pytest
 import soundfile as sf
 
 from conftest import BUNDLED_MUSIC, REPO
+from servers import http_folder, uvicorn_server
 
 TRUMPET = BUNDLED_MUSIC / "sorohanro_-_solo-trumpet-06.ogg"
 CLIENTS = REPO / "tests" / "clients"
 MAX_UPLOAD_MB = 1.0  # the trumpet song (67 kB) fits; the oversized test sends more
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="module")
 def server():
     """The app under uvicorn in a thread on a free 127.0.0.1 port; yields (host, port)."""
-    import uvicorn
-
     from dancesynth.web.server import create_app
 
-    app = create_app(max_upload_mb=MAX_UPLOAD_MB)
-    port = _free_port()
-    srv = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
-    thread = threading.Thread(target=srv.run, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 20
-    while not srv.started and time.monotonic() < deadline and thread.is_alive():
-        time.sleep(0.05)
-    assert srv.started, "the server did not start within 20 s"
-    yield "127.0.0.1", port
-    srv.should_exit = True
-    thread.join(timeout=10)
-    assert not thread.is_alive(), "the server did not stop within 10 s"
+    with uvicorn_server(create_app(max_upload_mb=MAX_UPLOAD_MB)) as address:
+        yield address
 
 
 @pytest.fixture(scope="module")
 def music_http():
     """The bundled songs over plain HTTP on 127.0.0.1 (a stand-in for an Internet radio); yields the base URL."""
-    handler = functools.partial(QuietHandler, directory=str(BUNDLED_MUSIC))
-    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
-    thread = threading.Thread(target=httpd.serve_forever, kwargs={"poll_interval": 0.1}, daemon=True)
-    thread.start()
-    yield f"http://127.0.0.1:{httpd.server_address[1]}"
-    httpd.shutdown()
-    httpd.server_close()
-    thread.join(timeout=10)
-
-
-class QuietHandler(http.server.SimpleHTTPRequestHandler):
-    def log_message(self, *args):
-        pass
+    with http_folder(BUNDLED_MUSIC) as url:
+        yield url
 
 
 def request(server, method, path, body=None, headers=None, timeout=60):
@@ -338,3 +306,6 @@ def test_the_page_dances_live_to_a_stream_in_headless_chromium(server, music_htt
     report = run_viewer(server, tmp_path, "live", f"{music_http}/{TRUMPET.name}")
     live = report["page"]["live"]
     assert live["frames"] > 45 and live["beats"] >= 2
+    # The delay the server asks for is enough: the motion of every moment heard had arrived.
+    assert live["delay_s"] == pytest.approx(2 + 1.5 + 1.0)
+    assert live["playing_s"] > 0.5 and live["starved_s"] < 0.1, live

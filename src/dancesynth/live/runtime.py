@@ -55,6 +55,8 @@ class SegmentReport:
     segment_s: float
     ready_s: float            # wall time since the first audio arrived when its frames reached the sink
     silence_s: float          # silence fed for stalls so far
+    beat_times_s: tuple = ()  # the music beats this segment dances to (stream time)
+    tempo_bpm: float = 0.0    # the tracker's tempo when the segment was cut
 
     @property
     def late(self) -> bool:
@@ -72,7 +74,8 @@ class _Worker:
         self.frames = 0
         self.reports: list[SegmentReport] = []
 
-    def run(self, index: int, segment: MusicSegment, audio_end_s: float, segment_s: float, silence_s: float):
+    def run(self, index: int, segment: MusicSegment, audio_end_s: float, segment_s: float, silence_s: float,
+            beats: tuple, tempo: float):
         t = time.perf_counter()
         self.state, out = self.engine.step(self.state, segment)
         process_s = time.perf_counter() - t
@@ -81,7 +84,7 @@ class _Worker:
         self.frames += clip.n_frames
         self.on_frames(clip)
         report = SegmentReport(index, audio_end_s, len(segment.intensity_db), start, self.frames / self.fps,
-                               process_s, segment_s, time.perf_counter() - self.t0, silence_s)
+                               process_s, segment_s, time.perf_counter() - self.t0, silence_s, beats, tempo)
         self.reports.append(report)
         if self.on_report is not None:
             self.on_report(report)
@@ -171,7 +174,9 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
                 last = inten[-1] if inten.size else 0.0
                 inten = np.concatenate((inten, np.full(n_after, last)))
             segment = MusicSegment(times, inten, remaining_beats=None, end_s=end_s)
-            futures.append(executor.submit(worker.run, index, segment, heard_s, config.segment_s, silence_s))
+            new_beats = tuple(float(t) for t in (times if index == 0 else times[1:]))
+            futures.append(executor.submit(worker.run, index, segment, heard_s, config.segment_s, silence_s,
+                                           new_beats, tempo))
             prev_beat = float(times[-1])
             index += 1
         for f in futures:

@@ -3,7 +3,8 @@
 ``create_app`` builds a Starlette app: the page and its static files (three.js is
 vendored, so it works offline), the bundled songs, and ``POST /api/dance``, which
 runs ``dancesynth.dance`` in a worker thread and answers the BVH text, the music's
-beats and a URL the page plays the song from. The page drives the animation from
+beats and a URL the page plays the song from. ``/ws/live?url=`` dances to a stream,
+shared by everyone who watches it (``web/live.py``); ``/api/live`` lists those streams. The page drives the animation from
 the audio element's clock, so motion and music stay in sync through seeks and pauses.
 
 The server is thin: it parses, calls one library function and reports. Errors a
@@ -23,7 +24,6 @@ import time
 import uuid
 from pathlib import Path
 
-import numpy as np
 
 from starlette.applications import Starlette
 from starlette.concurrency import run_in_threadpool
@@ -35,9 +35,10 @@ from starlette.requests import Request
 from starlette.responses import FileResponse, JSONResponse, Response
 from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
-from starlette.websockets import WebSocket, WebSocketDisconnect
+from starlette.websockets import WebSocket
 
 from ..errors import DanceSynthError, InputError
+from .live import LiveHub, watch
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 MUSIC_DIR = Path(__file__).resolve().parents[1] / "data" / "music"
@@ -133,7 +134,8 @@ def _limited(request: Request, max_bytes: int) -> Request:
 
 
 def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dances: int = 2,
-               max_stored_uploads: int = 8, max_live_streams: int = 2) -> Starlette:
+               max_stored_uploads: int = 8, max_live_streams: int = 2,
+               max_viewer_lag_s: float = 20.0, live_realtime: bool = True) -> Starlette:
     """The web app: the page, the bundled songs, and ``POST /api/dance``.
 
     ``database`` is passed to ``dancesynth.dance`` (a folder, a ``MotionDatabase`` or
@@ -148,7 +150,7 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
     store = UploadStore(max_files=max_stored_uploads)
     songs = {s["name"]: s for s in bundled_songs()}
     slots = asyncio.Semaphore(max_concurrent_dances)
-    live_slots = asyncio.Semaphore(max_live_streams)
+    hub = LiveHub(database, max_streams=max_live_streams, max_lag_s=max_viewer_lag_s, realtime=live_realtime)
     styles_cache: list = []
 
     async def index(request: Request) -> Response:
@@ -222,13 +224,10 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
 
     async def ws_live(ws: WebSocket) -> None:
         await ws.accept()
-        if live_slots.locked():
-            await ws.send_json({"type": "error", "error": f"the server already streams {max_live_streams} "
-                                                           "dances; try again later"})
-            await ws.close()
-            return
-        async with live_slots:
-            await _live_session(ws, database)
+        await watch(ws, hub)
+
+    async def api_live(request: Request) -> Response:
+        return JSONResponse(hub.status())
 
     async def on_error(request: Request, exc: Exception) -> Response:
         return _error(500, f"internal error: {type(exc).__name__} (see the server's log)")
@@ -243,6 +242,7 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
         Route("/api/songs/{name}", api_song),
         Route("/api/uploads/{key}", api_upload),
         Route("/api/dance", api_dance, methods=["POST"]),
+        Route("/api/live", api_live),
         WebSocketRoute("/ws/live", ws_live),
         Mount("/static", app=StaticFiles(directory=STATIC_DIR), name="static"),
     ]
@@ -251,129 +251,13 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
         try:
             yield
         finally:
+            hub.close()
             store.close()
 
     app = Starlette(routes=routes, middleware=[Middleware(GZipMiddleware, minimum_size=1024)],
                     exception_handlers={Exception: on_error, HTTPException: on_http_error}, lifespan=lifespan)
     app.state.uploads = store
     return app
-
-
-class _TeeSource:
-    """An ``AudioSource`` whose chunks are also relayed (as 16-bit PCM) and beat-tracked for the page."""
-
-    def __init__(self, source, send, segment_s: float):
-        from ..live.beats import StreamingBeatTracker
-
-        self._source, self._send = source, send
-        self.sr, self.spec = source.sr, source.spec
-        self._tracker = StreamingBeatTracker(source.sr)
-        self._segment_s, self._next = segment_s, segment_s
-
-    @property
-    def error(self) -> str:
-        return self._source.error
-
-    def read(self, timeout: float):
-        try:
-            chunk = self._source.read(timeout)
-        except StopIteration:
-            self._send("beats", self._tracker.flush())
-            raise
-        if chunk is not None and chunk.samples.size:
-            pcm = (np.clip(chunk.samples, -1.0, 1.0) * 32767.0).astype("<i2")
-            self._send("audio", pcm.tobytes())
-            self._tracker.push(chunk.samples)
-            if self._tracker.heard_s >= self._next:
-                self._next += self._segment_s
-                self._send("beats", self._tracker.update())
-        return chunk
-
-
-async def _live_session(ws: WebSocket, database) -> None:
-    """Dance to ``?url=`` (an http(s) stream) with ``run_live`` in a thread; relay audio, motion and beats.
-
-    Messages: ``start`` (sample rate, fps, the playback delay the double buffer
-    needs), binary 16-bit mono PCM from stream time 0 on, ``hierarchy`` once, ``frames``
-    (BVH rows from ``start_frame``) per segment, ``beats`` per segment, then
-    ``end`` or ``error``. A client that stops reading for 10 s ends the session.
-    """
-    from ..live.runtime import LiveConfig, run_live
-    from ..live.sources import AudioSource
-    from ..io.bvh_writer import bvh_parts
-
-    q = ws.query_params
-    url = q.get("url", "").strip()
-    try:
-        segment_s = float(q.get("segment_s") or 5.0)
-        seed = int(q["seed"]) if q.get("seed") else None
-    except ValueError:
-        segment_s = seed = None
-    if not url.startswith(("http://", "https://")):
-        await ws.send_json({"type": "error", "error": "give the stream as ?url=http(s)://..."})
-        return await ws.close()
-    if segment_s is None or not 1.0 <= segment_s <= 30.0:
-        await ws.send_json({"type": "error", "error": "segment_s must be a number from 1 to 30 and seed a "
-                                                      "whole number"})
-        return await ws.close()
-    loop = asyncio.get_running_loop()
-    queue: asyncio.Queue = asyncio.Queue(maxsize=64)
-    stop = threading.Event()
-    frames_sent = 0
-
-    def send(kind, payload) -> None:  # called from the live thread; waits (bounded) for a slow client
-        if stop.is_set():
-            return
-        try:
-            asyncio.run_coroutine_threadsafe(queue.put((kind, payload)), loop).result(timeout=10)
-        except Exception:
-            stop.set()
-
-    def live() -> None:
-        try:
-            source = AudioSource(url, realtime=True)
-        except DanceSynthError as exc:
-            return send("error", str(exc))
-        try:
-            config = LiveConfig(segment_s=segment_s, style=q.get("style") or None, seed=seed, database=database)
-            summary = run_live(_TeeSource(source, send, segment_s), lambda clip: send("frames", clip),
-                               config=config, stop=stop)
-            send("end", {k: v for k, v in summary.items() if isinstance(v, (int, float, str, type(None)))})
-        except DanceSynthError as exc:
-            send("error", str(exc))
-        except Exception as exc:
-            send("error", f"internal error: {type(exc).__name__}")
-        finally:
-            source.close()
-
-    thread = threading.Thread(target=live, daemon=True, name="dancesynth-live")
-    await ws.send_json({"type": "start", "sr": 22050, "delay_s": 2 * segment_s + 1.0, "segment_s": segment_s})
-    thread.start()
-    try:
-        while True:
-            kind, payload = await queue.get()
-            if kind == "audio":
-                await ws.send_bytes(payload)
-            elif kind == "frames":
-                hierarchy, rows = bvh_parts(payload)
-                if frames_sent == 0:
-                    await ws.send_json({"type": "hierarchy", "bvh": hierarchy, "fps": payload.fps})
-                await ws.send_json({"type": "frames", "start_frame": frames_sent, "rows": rows})
-                frames_sent += len(rows)
-            elif kind == "beats":
-                await ws.send_json({"type": "beats", "beats": [round(float(t), 4) for t in payload.beat_times_s],
-                                    "tempo_bpm": float(payload.tempo_bpm)})
-            else:
-                await ws.send_json({"type": kind, ("error" if kind == "error" else "summary"): payload})
-                break
-        await ws.close()
-    except (WebSocketDisconnect, RuntimeError):
-        pass
-    finally:
-        stop.set()
-        while not queue.empty():  # unblock a waiting sender
-            queue.get_nowait()
-        await asyncio.to_thread(thread.join, 15)
 
 
 def _text(form, key: str) -> str:

@@ -136,8 +136,16 @@ function lastBeat(beats, t) {
 function frame() {
 	resize();
 	if (live && live.t0 !== null) {
-		live.time = live.ctx.currentTime - live.t0;
+		const now = live.ctx.currentTime;
+		live.time = live.start + now - live.t0;
 		state.live.time = live.time;
+		// Starved: the music plays a moment whose motion has not arrived (the delay was too short).
+		if (now > live.t0 && live.last !== null) {
+			state.live.playing_s += now - live.last;
+			const ready = live.base === null ? -Infinity : (live.base + live.rows.length) / live.fps;
+			if (live.time > ready) state.live.starved_s += now - live.last;
+		}
+		live.last = now;
 	}
 	if (dance) {
 		const t = live ? Math.max(live.time, 0) : audio.currentTime || 0;
@@ -245,6 +253,7 @@ function liveAudio(buffer) {
 }
 
 function liveFrames(startFrame, rows) {
+	if (live.base === null) live.base = startFrame; // a late viewer starts from the backlog
 	live.rows.push(...rows);
 	const drop = live.rows.length - Math.round(KEEP_S * live.fps);
 	if (drop > 0) { live.rows.splice(0, drop); live.base += drop; }
@@ -268,9 +277,10 @@ function startLive(event) {
 		seed: $('seed').value });
 	const ws = new WebSocket(`${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws/live?${params}`);
 	ws.binaryType = 'arraybuffer';
-	live = { ws, ctx: new AudioContext(), t0: null, sr: 22050, samples: 0, fps: 30, delay: 10, hierarchy: null,
-		rows: [], base: 0, beats: [], time: 0 };
-	state.live = { state: 'connecting', frames: 0, beats: 0, time: 0, heard_s: 0, error: null };
+	live = { ws, ctx: new AudioContext(), t0: null, last: null, sr: 22050, samples: 0, fps: 30, delay: 10,
+		start: 0, hierarchy: null, rows: [], base: null, beats: [], time: 0 };
+	state.live = { state: 'connecting', frames: 0, beats: 0, time: 0, heard_s: 0, error: null, starved_s: 0,
+		playing_s: 0, delay_s: null };
 	setStatus('Connecting to the stream…');
 	const mine = live;
 	ws.onmessage = (ev) => {
@@ -278,7 +288,8 @@ function startLive(event) {
 		if (typeof ev.data !== 'string') { liveAudio(ev.data); return; }
 		const m = JSON.parse(ev.data);
 		if (m.type === 'start') {
-			live.sr = m.sr; live.delay = m.delay_s;
+			live.sr = m.sr; live.delay = m.delay_s; live.fps = m.fps; live.start = m.start_s || 0;
+			state.live.delay_s = m.delay_s;
 			state.live.state = 'listening';
 			setStatus(`Listening; the dance starts ${m.delay_s.toFixed(1)} s after the music arrives…`);
 		} else if (m.type === 'hierarchy') {

@@ -1,0 +1,319 @@
+"""Live dances shared by every viewer of the same stream.
+
+One ``Broadcast`` per stream (URL, segment length, style, seed) runs ``run_live`` in
+a thread and fans its messages out to the viewers' own queues. Publishing never
+waits: a viewer that falls more than ``max_lag_s`` of audio behind is dropped with a
+message, so a slow connection never slows the dance or the other viewers. A bounded
+backlog (the last ``delay_s`` of audio, the frames and beats from there on) lets a
+viewer join late and still see motion and music in sync, at everyone's delay.
+
+Messages, in order: ``start`` (sample rate, fps, ``start_s`` the stream time of the
+first audio sample this viewer gets, ``delay_s`` how long to buffer before playing),
+binary 16-bit mono PCM, ``hierarchy`` once, ``frames`` (BVH rows from ``start_frame``),
+``beats`` (stream times), then ``end`` (a summary) or ``error``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import threading
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import DanceSynthError
+from ..live.beats import LATENCY_S
+from ..live.sources import SR
+
+# Motion for stream time t is ready one segment plus the beat tracker's latency after t
+# arrives, plus the step; the margin covers the step and network jitter.
+DELAY_MARGIN_S = 1.0
+MIN_JOIN_DELAY_S = 0.3
+
+
+def playback_delay_s(segment_s: float) -> float:
+    """How long a viewer buffers audio so the motion of each moment is there before it is heard."""
+    return segment_s + LATENCY_S + DELAY_MARGIN_S
+
+
+@dataclass(eq=False)
+class Viewer:
+    queue: asyncio.Queue = field(default_factory=asyncio.Queue)
+    lag_s: float = 0.0          # audio queued for this viewer and not yet sent
+    dropped: str = ""           # why the broadcast let go of this viewer
+    sender: asyncio.Task | None = None
+    backlog_s: float = 0.0      # audio handed over at once when it joined (not a lag)
+
+    def offer(self, message, audio_s: float, max_lag_s: float) -> bool:
+        if self.dropped:
+            return False
+        if self.lag_s + audio_s > max_lag_s + self.backlog_s:
+            self.drop(max_lag_s)
+            return False
+        self.lag_s += audio_s
+        self.queue.put_nowait((message, audio_s))
+        return True
+
+    def drop(self, max_lag_s: float) -> None:
+        self.dropped = f"your connection fell {max_lag_s:g} s behind the stream; reconnect to watch from now"
+        if self.sender is not None:
+            self.sender.cancel()  # it may be stuck writing to a full socket
+
+
+class Broadcast:
+    """One stream danced once and watched by many; lives on the event loop, its dance in a thread."""
+
+    def __init__(self, url: str, config, *, loop: asyncio.AbstractEventLoop, max_lag_s: float, on_over,
+                 realtime: bool = True, stats: dict | None = None):
+        self.url, self.config, self.loop = url, config, loop
+        self.max_lag_s, self.realtime = max_lag_s, realtime
+        self.stats = stats if stats is not None else {"dropped_viewers": 0, "viewers": 0}
+        self.delay_s = playback_delay_s(config.segment_s)
+        self.viewers: set[Viewer] = set()
+        self.dropped = 0
+        self._on_over = on_over
+        self._audio: deque = deque()      # (start sample, bytes) for the last delay_s
+        self._samples = 0
+        self._hierarchy: str | None = None
+        self._frames: deque = deque()     # (start frame, text of the frames message)
+        self._n_frames = 0
+        self._beats: deque = deque()      # (time s, text of the beats message)
+        self.final: str | None = None     # the end or error message once the dance is over
+        self.stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True, name="dancesynth-live")
+        self._thread.start()
+
+    # -- the dance thread ------------------------------------------------------------------
+    def _run(self) -> None:
+        from ..io.bvh_writer import bvh_parts
+        from ..live.runtime import run_live
+        from ..live.sources import AudioSource
+
+        def post(fn, *args):
+            if not self.stop.is_set():
+                self.loop.call_soon_threadsafe(fn, *args)
+
+        def on_frames(clip):
+            hierarchy, rows = bvh_parts(clip)
+            post(self._publish_frames, hierarchy, clip.fps, rows)
+
+        def on_report(report):
+            text = json.dumps({"type": "beats", "beats": [round(t, 4) for t in report.beat_times_s],
+                               "tempo_bpm": round(float(report.tempo_bpm), 2)})
+            post(self._publish_beats, report.beat_times_s, text)
+
+        source = None
+        try:
+            source = AudioSource(self.url, realtime=self.realtime)
+            summary = run_live(_RelaySource(source, lambda pcm: post(self._publish_audio, pcm)), on_frames,
+                               config=self.config, on_report=on_report, realtime=self.realtime, stop=self.stop)
+            plain = {k: v for k, v in summary.items() if isinstance(v, (int, float, str, type(None)))}
+            final = {"type": "end", "summary": plain}
+        except DanceSynthError as exc:
+            final = {"type": "error", "error": str(exc)}
+        except Exception as exc:  # noqa: BLE001 - a viewer gets a message, never a traceback
+            final = {"type": "error", "error": f"internal error: {type(exc).__name__}"}
+        finally:
+            if source is not None:
+                source.close()
+        try:
+            self.loop.call_soon_threadsafe(self._finish, json.dumps(final))
+        except RuntimeError:  # the server has shut down
+            pass
+
+    # -- the event loop --------------------------------------------------------------------
+    def _send_all(self, message, audio_s: float = 0.0) -> None:
+        for viewer in list(self.viewers):
+            # Unpaced, audio outruns every viewer: only a blocked send (in _pump) counts as too slow.
+            if not viewer.offer(message, audio_s, self.max_lag_s if self.realtime else float("inf")):
+                self.leave(viewer)
+
+    def _publish_audio(self, pcm: bytes) -> None:
+        self._audio.append((self._samples, pcm))
+        self._samples += len(pcm) // 2
+        while self._audio and self._samples - self._audio[0][0] - len(self._audio[0][1]) // 2 > self.delay_s * SR:
+            self._audio.popleft()
+        self._send_all(pcm, len(pcm) / 2 / SR)
+
+    def _publish_frames(self, hierarchy: str, fps: float, rows: list[str]) -> None:
+        if self._hierarchy is None:
+            self._hierarchy = json.dumps({"type": "hierarchy", "bvh": hierarchy, "fps": fps})
+            self._send_all(self._hierarchy)
+        text = json.dumps({"type": "frames", "start_frame": self._n_frames, "rows": rows})
+        self._frames.append((self._n_frames, len(rows), text))
+        self._n_frames += len(rows)
+        oldest_s = self._backlog_start_s()
+        while len(self._frames) > 1 and (self._frames[0][0] + self._frames[0][1]) / fps < oldest_s:
+            self._frames.popleft()
+        self._send_all(text)
+
+    def _publish_beats(self, beats, text: str) -> None:
+        self._beats.append((max(beats) if beats else -np.inf, text))
+        while self._beats and self._beats[0][0] < self._backlog_start_s() - 2.0:
+            self._beats.popleft()
+        self._send_all(text)
+
+    def _backlog_start_s(self) -> float:
+        return self._audio[0][0] / SR if self._audio else self._samples / SR
+
+    def _finish(self, final: str) -> None:
+        self.final = final
+        self._send_all(final)
+        self._on_over(self)
+
+    def join(self) -> Viewer:
+        """A new viewer, handed the backlog so it plays in sync from the oldest audio kept."""
+        viewer = Viewer()
+        self.stats["viewers"] += 1
+        start_s = self._backlog_start_s()
+        backlog_s = self._samples / SR - start_s
+        start = {"type": "start", "sr": SR, "fps": self.config.fps, "segment_s": self.config.segment_s,
+                 "start_s": round(start_s, 6), "delay_s": max(self.delay_s - backlog_s, MIN_JOIN_DELAY_S)}
+        messages = [json.dumps(start)]
+        messages += [self._hierarchy] if self._hierarchy else []
+        messages += [text for *_, text in self._frames] + [text for _, text in self._beats]
+        for message in messages:
+            viewer.queue.put_nowait((message, 0.0))
+        viewer.backlog_s = backlog_s
+        for _, pcm in self._audio:
+            viewer.offer(pcm, len(pcm) / 2 / SR, float("inf"))
+        if self.final is not None:
+            viewer.queue.put_nowait((self.final, 0.0))
+        else:
+            self.viewers.add(viewer)
+        return viewer
+
+    def leave(self, viewer: Viewer) -> None:
+        if viewer in self.viewers and viewer.dropped:
+            self.dropped += 1
+            self.stats["dropped_viewers"] += 1
+        self.viewers.discard(viewer)
+        if not self.viewers and self.final is None:
+            self.close()
+
+    def close(self) -> None:
+        """Stop dancing (nobody is watching); the thread ends within a read timeout."""
+        self.stop.set()
+        self._on_over(self)
+
+    def status(self) -> dict:
+        return {"url": self.url, "segment_s": self.config.segment_s, "viewers": len(self.viewers),
+                "dropped_viewers": self.dropped,
+                "max_viewer_lag_s": round(max((v.lag_s for v in self.viewers), default=0.0), 2), "heard_s": round(self._samples / SR, 2),
+                "frames": self._n_frames, "delay_s": self.delay_s, "over": self.final is not None}
+
+
+class _RelaySource:
+    """An ``AudioSource`` whose chunks are also handed on as 16-bit PCM."""
+
+    def __init__(self, source, relay):
+        self._source, self._relay = source, relay
+        self.sr, self.spec = source.sr, source.spec
+
+    @property
+    def error(self) -> str:
+        return self._source.error
+
+    def read(self, timeout: float):
+        chunk = self._source.read(timeout)
+        if chunk is not None and chunk.samples.size:
+            self._relay((np.clip(chunk.samples, -1.0, 1.0) * 32767.0).astype("<i2").tobytes())
+        return chunk
+
+
+class LiveHub:
+    """The server's broadcasts, at most ``max_streams`` at once, keyed by what makes two dances the same.
+
+    ``realtime=False`` relays a recorded file served over http as fast as it decodes
+    (no pacing, no stall bridging), for tests and benchmarks.
+    """
+
+    def __init__(self, database, *, max_streams: int = 2, max_lag_s: float = 20.0, realtime: bool = True):
+        self.database, self.max_streams, self.max_lag_s = database, max_streams, max_lag_s
+        self.realtime = realtime
+        self.broadcasts: dict[tuple, Broadcast] = {}
+        self.stats = {"viewers": 0, "dropped_viewers": 0}   # since the server started
+
+    def join(self, url: str, segment_s: float, style: str | None, seed: int | None) -> tuple[Broadcast, Viewer]:
+        from ..live.runtime import LiveConfig
+
+        key = (url, segment_s, style, seed)
+        broadcast = self.broadcasts.get(key)
+        if broadcast is None:
+            if len(self.broadcasts) >= self.max_streams:
+                raise _Busy(f"the server already dances to {self.max_streams} streams; watch one of them "
+                            "(the same URL and settings) or try again later")
+            config = LiveConfig(segment_s=segment_s, style=style, seed=seed, database=self.database)
+            broadcast = Broadcast(url, config, loop=asyncio.get_running_loop(), max_lag_s=self.max_lag_s,
+                                  on_over=self._forget, realtime=self.realtime, stats=self.stats)
+            self.broadcasts[key] = broadcast
+        return broadcast, broadcast.join()
+
+    def _forget(self, broadcast: Broadcast) -> None:
+        self.broadcasts = {k: b for k, b in self.broadcasts.items() if b is not broadcast}
+
+    def status(self) -> dict:
+        return {"streams": [b.status() for b in self.broadcasts.values()], **self.stats}
+
+    def close(self) -> None:
+        for b in list(self.broadcasts.values()):
+            b.close()
+
+
+class _Busy(DanceSynthError):
+    pass
+
+
+async def watch(ws, hub: LiveHub) -> None:
+    """Serve one viewer of ``/ws/live?url=...&segment_s=...&style=...&seed=...`` until the dance or the viewer ends."""
+    q = ws.query_params
+    url = q.get("url", "").strip()
+    try:
+        segment_s = float(q.get("segment_s") or 5.0)
+        seed = int(q["seed"]) if q.get("seed") else None
+    except ValueError:
+        segment_s = seed = None
+    if not url.startswith(("http://", "https://")):
+        return await _refuse(ws, "give the stream as ?url=http(s)://...")
+    if segment_s is None or not 1.0 <= segment_s <= 30.0:
+        return await _refuse(ws, "segment_s must be a number from 1 to 30 and seed a whole number")
+    try:
+        broadcast, viewer = hub.join(url, segment_s, q.get("style") or None, seed)
+    except _Busy as exc:
+        return await _refuse(ws, str(exc))
+    viewer.sender = asyncio.create_task(_pump(ws, viewer, broadcast))
+    try:
+        await viewer.sender
+        await asyncio.wait_for(ws.close(), 2.0)
+    except asyncio.CancelledError:
+        if not viewer.dropped:
+            raise  # the server is shutting down
+        with contextlib.suppress(Exception):  # best effort: the socket may be full
+            await asyncio.wait_for(ws.send_text(json.dumps({"type": "error", "error": viewer.dropped})), 1.0)
+    except Exception:  # the viewer went away
+        pass
+    finally:
+        broadcast.leave(viewer)
+
+
+async def _pump(ws, viewer: Viewer, broadcast: Broadcast) -> None:
+    """Send the viewer's queue in order; a send blocked for ``max_lag_s`` (nothing read) drops the viewer."""
+    while True:
+        message, audio_s = await viewer.queue.get()
+        send = ws.send_bytes(message) if isinstance(message, bytes) else ws.send_text(message)
+        try:
+            await asyncio.wait_for(send, broadcast.max_lag_s)
+        except asyncio.TimeoutError:
+            viewer.drop(broadcast.max_lag_s)
+            raise asyncio.CancelledError from None
+        viewer.lag_s -= audio_s
+        if message is broadcast.final:
+            return
+
+
+async def _refuse(ws, message: str) -> None:
+    await ws.send_text(json.dumps({"type": "error", "error": message}))
+    await ws.close()
