@@ -5,9 +5,11 @@ from __future__ import annotations
 import io
 import os
 import re
+import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +17,7 @@ import soundfile as sf
 
 import signals
 from conftest import BUNDLED_MUSIC, REPO
-from servers import http_folder
+from servers import QuietHandler, http_folder
 from dancesynth.errors import InputError
 from dancesynth.io.bvh import read_bvh
 from dancesynth.io.bvh_writer import BVHStreamWriter
@@ -144,3 +146,91 @@ def test_stream_bad_input(tmp_path):
     assert_clean_failure(run("stream", tmp_path / "missing.ogg", "-o", out), out, "missing.ogg")
     assert_clean_failure(run("stream", TRUMPET, "-o", tmp_path / "live.txt"), tmp_path / "live.txt", ".bvh")
     assert_clean_failure(run("stream", TRUMPET, "--fast", "--style", "tango", "-o", out), out, "unknown style")
+
+
+class _Radio(QuietHandler):
+    """Serves ``payload`` at ``rate`` bytes/s with no length, like an Internet radio that then goes off air."""
+
+    payload, rate, served = b"", 1.0, 0
+
+    def do_GET(self):
+        type(self).served += 1
+        if type(self).served > 1:  # off air: ffmpeg's reconnection finds nothing to play
+            self.send_error(503)
+            return
+        self.send_response(200)
+        self.send_header("Content-Type", "audio/mpeg")
+        self.end_headers()
+        step = max(int(self.rate / 10), 1)
+        for i in range(0, len(self.payload), step):
+            self.wfile.write(self.payload[i:i + step])
+            time.sleep(0.1)
+
+
+class _DroppingServer(QuietHandler):
+    """Serves files with ranges, but cuts the first connection off after ``cut`` of the file."""
+
+    cut, requests = 0.4, []
+
+    def do_GET(self):
+        data = (Path(self.directory) / self.path.lstrip("/")).read_bytes()
+        rng = self.headers.get("Range")
+        type(self).requests.append(rng)
+        if rng:
+            start = int(re.match(r"bytes=(\d+)-", rng).group(1))
+            self.send_response(206)
+            self.send_header("Content-Range", f"bytes {start}-{len(data) - 1}/{len(data)}")
+        else:
+            start = 0
+            self.send_response(200)
+        self.send_header("Accept-Ranges", "bytes")
+        self.send_header("Content-Length", str(len(data) - start))
+        self.end_headers()
+        if len(type(self).requests) == 1:  # the connection drops mid-file
+            self.wfile.write(data[:int(len(data) * self.cut)])
+            self.wfile.flush()
+            self.connection.shutdown(socket.SHUT_RDWR)
+            return
+        self.wfile.write(data[start:])
+
+
+def _mp3(tmp_path, seconds: float) -> bytes:
+    out = tmp_path / "radio.mp3"
+    subprocess.run(["ffmpeg", "-loglevel", "error", "-y", "-t", str(seconds), "-i", str(VIBE_ACE), "-vn", "-b:a", "64k",
+                    str(out)], check=True)
+    return out.read_bytes()
+
+
+@pytest.mark.slow
+def test_a_radio_that_sends_garbage_then_goes_off_air_mid_segment_ends_the_dance_cleanly(tmp_path):
+    mp3 = _mp3(tmp_path, 8.0)
+    half = len(mp3) // 2
+    garbage = np.random.default_rng(2).bytes(8000)  # one second's worth of noise bytes in the middle
+    _Radio.payload, _Radio.rate, _Radio.served = mp3[:half] + garbage + mp3[half:], 8000.0, 0
+    out = tmp_path / "live.bvh"
+    with http_folder(tmp_path, handler=_Radio) as url:
+        proc = run("stream", f"{url}/radio", "-o", out, "--segment-seconds", "3", timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+    clip = read_bvh(out)
+    # It goes off air 8 s in (mid-segment): the dance covers what was heard, plus the time the
+    # dancer kept dancing while ffmpeg tried to reconnect (reported as stalls bridged), no more.
+    bridged = re.search(r"([\d.]+) s of stalls bridged", proc.stdout)
+    bridged_s = float(bridged.group(1)) if bridged else 0.0
+    assert bridged_s < 6.0
+    assert clip.duration_s == pytest.approx(8.0 + bridged_s, abs=0.6)
+    assert np.all(np.isfinite(clip.local_rot))
+
+
+@pytest.mark.slow
+def test_a_dropped_connection_is_resumed_and_the_whole_song_is_danced(tmp_path):
+    excerpt = tmp_path / "excerpt.ogg"
+    subprocess.run(["ffmpeg", "-loglevel", "error", "-y", "-t", "12", "-i", str(VIBE_ACE), str(excerpt)], check=True)
+    _DroppingServer.requests = []
+    out = tmp_path / "live.bvh"
+    with http_folder(tmp_path, handler=_DroppingServer) as url:
+        proc = run("stream", f"{url}/excerpt.ogg", "-o", out, "--fast", "-q", timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    first, resumed = _DroppingServer.requests[:2]
+    assert first in (None, "bytes=0-") and int(re.match(r"bytes=(\d+)-", resumed).group(1)) > 0
+    assert read_bvh(out).duration_s == pytest.approx(12.0, abs=0.2)
