@@ -157,3 +157,27 @@ def list_styles(database: MotionDatabase | str | Path | None = None) -> list[dic
              "tempo_max_bpm": s.tempo_range_bpm[1], "clips": s.n_clips, "minutes": s.duration_s / 60.0,
              "beats": len(s.beat_frames), "joints": s.skeleton.n_joints, "fps": s.fps}
             for s in sorted(db.styles.values(), key=lambda s: s.name)]
+
+
+def conduct(song, *, config=None, melody_track: int | None = None, rhythm_track: int | None = None,
+            skeleton=None, max_duration_s: float = 15 * 60.0) -> MotionClip:
+    """Upper-body motion interpreting ``song``'s melody (Loi & Li): a MIDI file, an audio file or a
+    ``NoteSequence``. ``config`` is a ``ProceduralConfig`` (default look when ``None``).
+
+    Returns a ``MotionClip`` on the default skeleton (the bundled ``mj`` style's) unless
+    ``skeleton`` is given; ``clip.meta["summary"]`` says what was done.
+    """
+    from .engines.procedural import conduct_notes
+    from .music.melody import read_notes
+    from .music.notes import NoteSequence
+
+    t = time.perf_counter()
+    notes = song if isinstance(song, NoteSequence) else read_notes(
+        song, melody_track=melody_track, rhythm_track=rhythm_track, max_duration_s=max_duration_s)
+    notes_s = time.perf_counter() - t
+    clip = conduct_notes(notes, config, skeleton=skeleton)
+    clip.meta["summary"]["timings_s"]["notes_s"] = notes_s
+    clip.meta["summary"]["song"] = notes.source
+    clip.meta["summary"]["input"] = notes.meta.get("kind", "notes")
+    clip.meta["notes_meta"] = notes.meta
+    return clip

@@ -339,6 +339,36 @@ def serve(host, port, database, max_upload_mb):
     run_server(host=host, port=port, database=database, max_upload_mb=max_upload_mb)
 
 
+@cli.command()
+@click.argument("song", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), help="BVH to write (default: SONG.bvh).")
+@click.option("--melody-track", type=int, help="MIDI part that carries the melody (see --list-tracks).")
+@click.option("--rhythm-track", type=int, help="MIDI part that gives the beats (default: drums, else the bass).")
+@click.option("--style", help="A look: default, e1, e2, calm, lively.")
+@click.option("--config", "config_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="TOML file of parameters (style = \"calm\", l1 = 0.3, ...); see docs/procedural.md.")
+@click.option("--param", "params", multiple=True, metavar="NAME=VALUE", help="Override one parameter (repeatable).")
+@click.option("--fps", type=float, default=None, help="Frame rate of the output (default 30).")
+@click.option("--list-tracks", is_flag=True, help="List the MIDI parts and the ones chosen, then stop.")
+@click.option("-q", "--quiet", is_flag=True, help="No summary.")
+def conduct(song, output, melody_track, rhythm_track, style, config_path, params, fps, list_tracks, quiet):
+    """Upper-body motion drawing SONG's melody and marking its beats (Loi & Li); SONG: MIDI or a recording."""
+    from .api import conduct as make_motion
+    from .engines.procedural import make_config
+    from .engines.procedural.report import parts_lines, summary_lines
+    from .io.bvh import write_bvh
+
+    if list_tracks:
+        return click.echo("\n".join(parts_lines(song)))
+    output = output or Path(song.stem + ".bvh")
+    if output.suffix.lower() != ".bvh":
+        raise InputError(f"output {output} must end in .bvh")
+    cfg = make_config(style=style, config_path=config_path, params=params, fps=fps)
+    write_bvh(output, clip := make_motion(song, config=cfg, melody_track=melody_track, rhythm_track=rhythm_track))
+    if not quiet:
+        click.echo("\n".join(summary_lines(clip.meta["summary"], output)))
+
+
 def main(argv=None) -> int:
     _setup_env()
     try:
