@@ -23,7 +23,9 @@ def tiny_config(tmp_path) -> BenchConfig:
     return replace(BenchConfig.quick(), song_max_s=20.0, segments_s=(2.0, 5.0), repeats=1, scales=(1,),
                    pipeline_song_s=15.0, pipeline_runs=1, quality_songs=(HUNGARIAN,), quality_max_s=None,
                    mocap_max_clips=1, groundtruth_specs=specs, groundtruth_dir=tmp_path / "groundtruth",
-                   trackers=("dp",))
+                   trackers=("dp",), structure_songs=(HUNGARIAN,), structure_max_s=30.0,
+                   structure_engines=("streaming", "signature", "choreography"), fig12_song=HUNGARIAN, fig12_seeds=1,
+                   fig12_engines=("signature",), recreate_clips=1)
 
 
 @pytest.fixture(scope="module")
@@ -126,6 +128,25 @@ def test_beat_tracking_scores_each_tracker_by_tag(bench):
     assert r["f_measure"] > 0.5 and r["speed_x_realtime"] > 1
     assert r["f_3/4"] is not None and r["f_no drums"] is not None and r["f_step"] is None  # no step song here
     assert s["groups"]["constant"] == 2
+
+
+def test_structure_measures_every_engine_against_the_genre_template(bench):
+    result, out, _ = bench
+    s = result["structure"]
+    assert s["engines"] == ["mocap", "streaming", "signature", "choreography"] and s["genre"] == "salsa"
+    t = s["table_i"]
+    # A raw dance is closer to a template it is part of than to the template of the others.
+    assert t["mocap"]["dances"] == 26 and 0 < t["mocap"]["chi2_danced"] < t["mocap"]["chi2"] < 1
+    for engine in ("streaming", "signature", "choreography"):
+        assert t[engine]["dances"] == 1 and 0 < t[engine]["chi2"] < 1 and t[engine]["chi2_danced"] is not None
+    assert t["choreography"]["chi2_danced"] < 0.1   # eq. (5) plans towards the template
+    f = s["fig12"]
+    (curve,) = f["curves"]["signature"]
+    assert len(curve) == len(f["times_s"]) and f["times_s"][-1] <= 30.0 and (out / "fig12_chi2.png").is_file()
+    (row,) = s["recreation"]["rows"]
+    assert row["danced"] >= 0.8 and 0 < row["found_again"] <= 1
+    for engine in s["engines"]:
+        assert s["metrics"][engine]["hit_rate"] is not None
 
 
 def test_tables_have_the_same_layout_whatever_the_numbers(bench):

@@ -17,7 +17,7 @@ from .errors import InputError
 from .motion.database import MotionDatabase, open_database
 from .types import MotionClip, MusicFeatures
 
-ENGINES = ("streaming", "global")
+ENGINES = ("streaming", "global", "neural", "choreography")
 FALLBACK_BPM = 100.0  # the tempo we dance at when the music has no clear beat
 
 
@@ -26,17 +26,33 @@ class DanceConfig:
     """Everything ``dance`` can be told, with the defaults in one place."""
 
     style: str | None = None
-    engine: str = "streaming"
+    engine: str | None = None   # None: "choreography" when motif_at or recreate is given, else "streaming"
     segment_s: float = 5.0
     fps: float = 30.0
     seed: int | None = None
     max_duration_s: float = 15 * 60.0
     graph: GraphConfig = field(default_factory=GraphConfig)
     render: EngineConfig = field(default_factory=EngineConfig)
+    motif_at: tuple = ()                # choreography: ("12.0=M17", ...) or ((12.0, 17), ...); see docs/choreography.md
+    recreate: str | Path | None = None  # choreography: a reference BVH whose motif sequence to re-create
+    follow_signature: bool = False      # streaming: also keep the genre's motif signature (engines/graph/signature.py)
 
     def __post_init__(self):
+        # Choreography constraints: one "12.0=M17" string or a sequence of them / of (seconds, motif) pairs.
+        object.__setattr__(self, "motif_at", (self.motif_at,) if isinstance(self.motif_at, str)
+                           else tuple(self.motif_at))
+        constrained = bool(self.motif_at) or self.recreate is not None
+        if self.engine is None:
+            object.__setattr__(self, "engine", "choreography" if constrained else "streaming")
+        if constrained and self.engine != "choreography":
+            raise InputError(f"--motif-at and --recreate need the choreography engine, not '{self.engine}': "
+                             "leave out --engine (they imply --engine choreography)")
         if self.engine not in ENGINES:
             raise InputError(f"unknown engine '{self.engine}': use one of {', '.join(ENGINES)}")
+        if self.follow_signature and self.engine != "streaming":
+            raise InputError(f"--follow-signature is for the streaming engine, not '{self.engine}' (the choreography "
+                             "and neural engines follow the signature already; the global DP has no notion of "
+                             "what has been danced so far)")
         if not 0.5 <= self.segment_s <= 600:
             raise InputError(f"segment length {self.segment_s} s is out of range: use 0.5 to 600 seconds")
         if not 1 <= self.fps <= 240:
@@ -106,6 +122,18 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
 
     t = time.perf_counter()
     db = database if isinstance(database, MotionDatabase) else open_database(database)
+    if config.engine == "neural":  # the learned pose generator (Aristidou et al. §4); torch loads lazily
+        from .engines.neural.engine import neural_dance
+
+        timings["database_s"] = time.perf_counter() - t
+        return neural_dance(music, db, config, song=music.source if isinstance(song, MusicFeatures) else str(song),
+                            timings=timings)
+    if config.engine == "choreography":  # motifs by eq. (5), danced with mocap words (Aristidou et al. §5.2)
+        from .engines.choreography import choreography_dance
+
+        timings["database_s"] = time.perf_counter() - t
+        return choreography_dance(music, db, config, timings=timings,
+                                  song=music.source if isinstance(song, MusicFeatures) else str(song))
     style, subdivide = choose_style(db, music.tempo_bpm, config.style)
     timings["database_s"] = time.perf_counter() - t
 
@@ -115,7 +143,13 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
 
     t = time.perf_counter()
     grid = beat_grid(music, subdivide=subdivide)
-    engine = GraphEngine(style, graph, config.render, fps=config.fps)
+    signature = None
+    if config.follow_signature:
+        from .engines.graph.signature import signature_target
+        from .motion.motifs import load_motif_model
+
+        signature = signature_target(style, graph, load_motif_model(db), config.render.signature_weight)
+    engine = GraphEngine(style, graph, config.render, fps=config.fps, signature=signature)
     segments, stats = synthesise(engine, grid, music.duration_s, config, progress)
     timings["synthesis_s"] = time.perf_counter() - t
 
@@ -147,6 +181,15 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
                                       for s in segments]),
         "style": style.name,
     }
+    if signature is not None:
+        from .motion.motifs import chi2
+
+        ids = np.concatenate([s.motifs for s in segments])
+        danced = ids[ids >= 0]
+        summary.update(genre=signature.genre, motifs=len(signature.template), constraints=0, recreate=None,
+                       motif_chi2=chi2(signature.template, np.bincount(danced, minlength=len(signature.template)))
+                       if danced.size else None)
+        meta["motif_ids"] = ids
     return MotionClip(style.skeleton, config.fps, root, local, contacts=contacts, meta=meta)
 
 

@@ -55,8 +55,15 @@ def cli():
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
               help="BVH file to write (default: the song's name with .bvh, here).")
 @click.option("--style", help="Style or genre to dance (see 'dancesynth styles'); default: best tempo match.")
-@click.option("--engine", type=click.Choice(["streaming", "global"]), default="streaming", show_default=True,
-              help="streaming: segment by segment as music arrives (Xu et al.); global: whole-song DP baseline.")
+@click.option("--engine", type=click.Choice(["streaming", "global", "neural", "choreography"]), default=None,
+              help="streaming (default): segment by segment as music arrives (Xu et al.); global: whole-song DP "
+                   "baseline; choreography: motifs by eq. (5) danced with mocap words (Aristidou et al.).")
+@click.option("--recreate", type=click.Path(dir_okay=False, path_type=Path),
+              help="Re-create this BVH dance's motif sequence on SONG (implies --engine choreography).")
+@click.option("--motif-at", "motif_at", multiple=True, metavar="SECONDS=MOTIF",
+              help="Dance MOTIF (e.g. M17) on the beat at SECONDS; repeatable (implies --engine choreography).")
+@click.option("--follow-signature", is_flag=True,
+              help="Streaming engine: also keep the genre's motif signature (Aristidou et al.'s global structure).")
 @click.option("--segment-seconds", type=float, default=5.0, show_default=True, help="Streaming segment length.")
 @click.option("--fps", type=float, default=30.0, show_default=True, help="Frame rate of the output.")
 @click.option("--seed", type=int, default=None, help="Vary the dance between runs (default: deterministic).")
@@ -70,8 +77,8 @@ def cli():
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Also write a JSON report (beats, transitions, time warps) for 'dancesynth eval --report'.")
 @click.option("-q", "--quiet", is_flag=True, help="No summary and no progress bar.")
-def dance(song, output, style, engine, segment_seconds, fps, seed, database, max_minutes, ths, thr, paper,
-          report_path, quiet):
+def dance(song, output, style, engine, recreate, motif_at, follow_signature, segment_seconds, fps, seed, database,
+          max_minutes, ths, thr, paper, report_path, quiet):
     """Make a beat-synchronised dance for SONG (wav, ogg, flac, mp3, ...) and write it as BVH."""
     from .api import DanceConfig, dance as make_dance
     from .io.bvh import write_bvh
@@ -80,7 +87,8 @@ def dance(song, output, style, engine, segment_seconds, fps, seed, database, max
     if output.suffix.lower() != ".bvh":
         raise InputError(f"output {output} must end in .bvh")
     config = DanceConfig(style=style, engine=engine, segment_s=segment_seconds, fps=fps, seed=seed,
-                         max_duration_s=max_minutes * 60.0)
+                         max_duration_s=max_minutes * 60.0, motif_at=motif_at, recreate=recreate,
+                         follow_signature=follow_signature)
     from .engines.graph.engine import EngineConfig
     from .engines.graph.meta_graph import GraphConfig
 
@@ -115,6 +123,10 @@ def dance(song, output, style, engine, segment_seconds, fps, seed, database, max
     click.echo(f"style     {s['style']}" + (" (dancing double time)" if s["subdivide"] > 1 else ""))
     click.echo(f"engine    {s['engine']}: {s['segments']} segment(s) of {s['segment_s']:g} s, "
                f"{s['transitions']} transitions, median {s['step_s_median'] * 1e3:.1f} ms per segment")
+    if s.get("motif_chi2") is not None:
+        click.echo(f"motifs    chi2 to the {s['genre']} template {s['motif_chi2']:.3f}"
+                   + (f", {s['constraints']} constraint(s)" if s.get("constraints") else "")
+                   + (f", re-creating {s['recreate']}" if s.get("recreate") else ""))
     click.echo(f"time      music {tm['music_s']:.2f} s, database {tm['database_s']:.2f} s, graph "
                f"{tm['graph_s']:.2f} s{' (cached)' if s['graph_cached'] else ''}, synthesis "
                f"{tm['synthesis_s']:.2f} s, write {tm['write_s']:.2f} s; total {time.perf_counter() - t0:.2f} s")
@@ -169,6 +181,47 @@ def _write_json(path: Path, data) -> None:
     with atomic_output(path) as fh:
         json.dump(data, fh, indent=1, allow_nan=False)
         fh.write("\n")
+
+
+@cli.command()
+@click.argument("dance_path", metavar="DANCE.bvh", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--genre", help="Compare with this genre's template (default: the nearest template).")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the motif sequence, signature and template as JSON.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Draw the motif sequence and the signature vs. the template to a PNG/PDF/SVG.")
+@click.option("--database", type=click.Path(file_okay=False, path_type=Path),
+              help="Motifs of this database (built once and cached; default: the shipped motifs).")
+def motifs(dance_path, genre, json_path, plot_path, database):
+    """Print a dance's motif sequence (at its kinematic beats) and its signature vs. its genre template."""
+    from .io.bvh import read_bvh
+    from .motion.motifs import dance_motifs, load_motif_model
+
+    for out in (json_path, plot_path):
+        if out is not None and not out.parent.is_dir():
+            raise InputError(f"cannot write {out}: folder {out.parent} does not exist")
+    if database is not None:
+        from .motion.database import open_database
+
+        database = open_database(database)
+    result = dance_motifs(read_bvh(dance_path), load_motif_model(database), genre=genre)
+    guess = " (nearest template; --genre to choose)" if result["genre_guessed"] else ""
+    click.echo(f"{dance_path}: {result['duration_s']:.1f} s, {len(result['words'])} motion words, "
+               f"{result['k']} motifs")
+    click.echo(f"{'time (s)':>9}  motif")
+    for w in result["words"]:
+        click.echo(f"{w['start_s']:>9.2f}  {w['motif']}")
+    click.echo(f"genre  {result['genre']}{guess}")
+    click.echo(f"chi2 to the {result['genre']} template: {result['chi2']:.3f} "
+               f"(others: {', '.join(f'{g} {v:.3f}' for g, v in result['chi2_by_genre'].items() if g != result['genre'])})")
+    if json_path is not None:
+        _write_json(json_path, {"file": str(dance_path), **result})
+        click.echo(f"wrote  {json_path}")
+    if plot_path is not None:
+        from .motion.motif_plot import plot_motifs
+
+        plot_motifs(result, plot_path, title=f"{dance_path.name}: motif sequence")
+        click.echo(f"wrote  {plot_path}")
 
 
 @cli.command()
@@ -256,6 +309,49 @@ def bench(quick, out_dir):
 
 
 @cli.command()
+@click.option("--style", default="salsa", show_default=True, help="Style or genre to learn (see 'dancesynth styles').")
+@click.option("--config", "config_name", type=click.Choice(["tiny", "small", "paper"]), default="small",
+              show_default=True, help="Model size: small trains on a laptop CPU in 25 minutes, paper is Aristidou et al.'s.")
+@click.option("--device", type=click.Choice(["cpu", "cuda"]), default="cpu", show_default=True)
+@click.option("--minutes", type=float, default=None, help="Time budget (default: the config's).")
+@click.option("--out", "out_dir", type=click.Path(path_type=Path),
+              help="Folder (or .pt file) for the weights (default: the user cache, used by 'dance --engine neural').")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--database", type=click.Path(file_okay=False, path_type=Path),
+              help="A database folder or a folder of BVH files (default: the bundled database).")
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+def train(style, config_name, device, minutes, out_dir, seed, database, quiet):
+    """Train the learned pose generator of '--engine neural' (Aristidou et al. §4) on one genre."""
+    from .engines.neural.train import train as run_training
+
+    if minutes is not None and not minutes > 0:
+        raise InputError("--minutes must be positive")
+    bar = None
+    if not quiet and sys.stderr.isatty():
+        from tqdm import tqdm
+
+        bar = tqdm(total=100, desc="training", unit="%", leave=False, file=sys.stderr)
+
+    def progress(elapsed_s, budget_s, loss):
+        if bar is not None:
+            bar.update(min(100, int(100 * elapsed_s / budget_s)) - bar.n)
+            bar.set_postfix(loss=f"{loss:.3f}")
+
+    try:
+        info = run_training(style, config_name, device=device, minutes=minutes, out=out_dir, seed=seed,
+                            database=database, progress=progress)
+    finally:
+        if bar is not None:
+            bar.close()
+    last = info["curve"][-1]
+    held = f", held-out {last['held_out_loss']:.3f}" if "held_out_loss" in last else ""
+    click.echo(f"trained   {info['config']['name']} on {info['clips']} clips ({info['frames']} frames), "
+               f"{info['steps']} steps in {info['train_s']:.0f} s on {info['device']}")
+    click.echo(f"loss      {info['first_loss']:.3f} -> {info['final_loss']:.3f}{held}")
+    click.echo(f"wrote     {info['path']}")
+
+
+@cli.command()
 @click.argument("source")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=Path("live.bvh"),
               show_default=True, help="BVH file that grows as the dance goes (a valid BVH after every segment).")
@@ -265,9 +361,10 @@ def bench(quick, out_dir):
 @click.option("--seed", type=int, default=None, help="Vary the dance between runs.")
 @click.option("--database", type=click.Path(file_okay=False, path_type=Path),
               help="A database folder or a folder of BVH files (default: the bundled database).")
+@click.option("--follow-signature", is_flag=True, help="Also keep the genre's motif signature as the dance goes.")
 @click.option("--fast", is_flag=True, help="Read a file as fast as it decodes instead of at real-time pace.")
 @click.option("-q", "--quiet", is_flag=True, help="Only the summary, no line per segment.")
-def stream(source, output, segment_seconds, style, fps, seed, database, fast, quiet):
+def stream(source, output, segment_seconds, style, fps, seed, database, follow_signature, fast, quiet):
     """Dance to SOURCE as it arrives: an audio file (played at real-time pace), '-' for standard input,
     or an http(s) URL of an audio stream. Motion is synthesised segment by segment (Xu et al.'s double
     buffer) and appended to the BVH as it goes."""
@@ -285,7 +382,8 @@ def stream(source, output, segment_seconds, style, fps, seed, database, fast, qu
                        f"({100 * r.process_s / r.segment_s:4.1f}% of {r.segment_s:g} s)"
                        f"{'  LATE' if r.late else ''}  ready at {r.ready_s:6.2f} s")
 
-    config = LiveConfig(segment_s=segment_seconds, style=style, fps=fps, seed=seed, database=database)
+    config = LiveConfig(segment_s=segment_seconds, style=style, fps=fps, seed=seed, database=database,
+                        follow_signature=follow_signature)
     with AudioSource(source, realtime=not fast) as src, BVHStreamWriter(output) as writer:
         summary = run_live(src, writer.append, config=config, on_report=report, realtime=not fast)
     if summary["frames"] == 0:
@@ -297,6 +395,8 @@ def stream(source, output, segment_seconds, style, fps, seed, database, fast, qu
     click.echo(f"latency   first motion ready {summary['first_motion_ready_s']:.2f} s after start "
                f"({summary['first_audio_s']:.2f} s of audio heard)"
                + (f"; {summary['silence_s']:.1f} s of stalls bridged" if summary["silence_s"] > 0 else ""))
+    if summary["motif_chi2"] is not None:
+        click.echo(f"motifs    chi2 to the genre template {summary['motif_chi2']:.3f}")
     click.echo(f"wrote     {output} ({summary['frames']} frames at {fps:g} fps)")
 
 

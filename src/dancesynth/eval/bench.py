@@ -14,6 +14,9 @@ others still run):
 4. ``quality`` -- every metric of ``dancesynth.eval.evaluate`` for our dance, the
    global-DP baseline, a random walk on the same graph and the raw mocap.
 5. ``beat_tracking`` -- every beat tracker on generated songs with exact beats.
+6. ``structure`` -- Aristidou et al.'s global structure: chi2 to the genre template
+   per engine (Table I), its convergence (Fig. 12, plotted to ``fig12_chi2.png``),
+   each engine's metrics beside the raw mocap, re-creation of held-out dances.
 
 ``run_bench`` writes ``bench.json`` into ``out_dir`` and returns the same dict;
 ``format_bench`` turns it into the tables (same layout every run of a mode).
@@ -43,7 +46,8 @@ TITLES = {"fig4": "1. Synthesis time per segment (Xu et al. Fig. 4)",
           "scaling": "2. Growth with the database",
           "pipeline": "3. Graphs and a song end to end",
           "quality": "4. Quality on the bundled music",
-          "beat_tracking": "5. Beat tracking on generated ground truth"}
+          "beat_tracking": "5. Beat tracking on generated ground truth",
+          "structure": "6. Global structure: motifs and signatures (Aristidou et al.)"}
 
 
 def machine_info() -> dict:
@@ -87,7 +91,7 @@ def run_bench(*, quick: bool, out_dir: Path, progress: Progress | None = None,
             progress(f"section {name}")
         t = time.perf_counter()
         try:
-            result[name] = _run_section(name, cfg, shared, progress)
+            result[name] = _run_section(name, cfg, shared, progress, out_dir)
         except _Skip as exc:
             result[name] = {"skipped": str(exc)}
         except Exception as exc:  # one broken section must not lose the others' numbers
@@ -103,8 +107,8 @@ def run_bench(*, quick: bool, out_dir: Path, progress: Progress | None = None,
     return result
 
 
-def _run_section(name: str, cfg: BenchConfig, shared: dict, progress) -> dict:
-    if name in ("fig4", "scaling", "pipeline", "quality") and "db" not in shared:
+def _run_section(name: str, cfg: BenchConfig, shared: dict, progress, out_dir: Path) -> dict:
+    if name in ("fig4", "scaling", "pipeline", "quality", "structure") and "db" not in shared:
         from ..motion.database import open_database
 
         shared["db"] = open_database()
@@ -132,6 +136,10 @@ def _run_section(name: str, cfg: BenchConfig, shared: dict, progress) -> dict:
         from .bench_quality import quality
 
         return quality(cfg, shared["db"], progress)
+    if name == "structure":
+        from .bench_structure import structure
+
+        return structure(cfg, shared["db"], progress, out_dir)
     if name == "beat_tracking":
         import shutil
 
@@ -166,6 +174,14 @@ TARGETS = {
                                                                  ("build_peak_mb", "stream_peak_mb")), 1024.0),
     "peak memory, database x10, MB": ("scaling", lambda s: max(_row(s, "times", 10)[k] for k in
                                                                 ("build_peak_mb", "stream_peak_mb")), 1024.0),
+    # Aristidou et al.'s global structure (issue 6): signature-following engines near the genre template.
+    "chi2 to the template, streaming + signature": ("structure", lambda s: s["table_i"]["signature"]["chi2"], 0.2),
+    "chi2 to the template, choreography mixer": ("structure", lambda s: s["table_i"]["choreography"]["chi2"], 0.2),
+    "chi2 to the template, neural generator": ("structure", lambda s: s["table_i"]["neural"]["chi2"], 0.2),
+    "re-created beats with another motif, as danced": ("structure", lambda s: 1 - s["recreation"]["danced_mean"],
+                                                       0.2),
+    "re-created beats with another motif, found again": ("structure",
+                                                         lambda s: 1 - s["recreation"]["found_again_mean"], 0.2),
 }
 
 
@@ -214,9 +230,10 @@ def format_bench(result: dict) -> str:
     from .bench_beats import format_beat_tracking
     from .bench_quality import format_quality
     from .bench_speed import format_fig4, format_pipeline, format_scaling
+    from .bench_structure import format_structure
 
     formatters = {"fig4": format_fig4, "scaling": format_scaling, "pipeline": format_pipeline,
-                  "quality": format_quality, "beat_tracking": format_beat_tracking}
+                  "quality": format_quality, "beat_tracking": format_beat_tracking, "structure": format_structure}
     m = result.get("machine", {})
     timings = result.get("timings_s", {})
     out = [f"dancesynth {result.get('dancesynth', '?')} bench ({result.get('mode', '?')}), {result.get('started', '')}",

@@ -12,7 +12,7 @@ from ..types import MusicFeatures
 
 MUSIC_DIR = Path(__file__).resolve().parents[1] / "data" / "music"
 DEFAULT_SONG = "Kevin_MacLeod_-_Vibe_Ace.ogg"  # the README's demo song
-SECTIONS = ("fig4", "scaling", "pipeline", "quality", "beat_tracking")
+SECTIONS = ("fig4", "scaling", "pipeline", "quality", "beat_tracking", "structure")
 
 Progress = Callable[[str], None]
 
@@ -48,6 +48,20 @@ class BenchConfig:
     groundtruth_specs: tuple | None = None  # SongSpecs overriding the standard set (tests)
     groundtruth_dir: Path | None = None     # cache of rendered songs (None: the dancesynth cache)
     trackers: tuple[str, ...] | None = None  # None: every tracker in TRACKERS
+    # 6. Global structure (bench_structure): Table I, Fig. 12, metrics per engine, re-creation.
+    structure_songs: tuple[str, ...] | None = None   # None: every bundled song ...
+    structure_min_s: float = 20.0                     # ... long enough for a signature (not the 5 s trumpet)
+    structure_max_s: float | None = None
+    structure_seeds: int = 3
+    structure_engines: tuple[str, ...] = ("streaming", "signature", "global", "random_walk", "choreography",
+                                          "neural")
+    fig12_song: str | None = None          # None: the longest bundled song
+    fig12_seeds: int = 5
+    fig12_step_s: float = 5.0
+    fig12_engines: tuple[str, ...] = ("streaming", "signature", "choreography", "neural")
+    recreate_style: str = "salsa-120-150bpm"
+    recreate_song: str = DEFAULT_SONG
+    recreate_clips: int | None = None      # None: every clip of the style in turn
 
     @classmethod
     def full(cls) -> "BenchConfig":
@@ -58,7 +72,8 @@ class BenchConfig:
         """Under two minutes on a 2-core CPU."""
         return replace(cls(), segments_s=(2.0, 5.0, 10.0, 30.0), repeats=5, scales=(1, 2), pipeline_runs=1,
                        quality_songs=(DEFAULT_SONG,), quality_max_s=60.0, mocap_max_clips=6,
-                       groundtruth_quick=True)
+                       groundtruth_quick=True, structure_songs=(DEFAULT_SONG,), structure_seeds=1, fig12_seeds=2,
+                       fig12_song=DEFAULT_SONG, recreate_clips=4)
 
 
 def load_song(name: str, max_s: float | None = None) -> MusicFeatures:

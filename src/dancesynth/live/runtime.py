@@ -27,6 +27,7 @@ from ..engines.graph.cache import load_graph
 from ..engines.graph.engine import EngineConfig, GraphEngine, MusicSegment
 from ..errors import InputError
 from ..motion.database import open_database
+from ..motion.motifs import chi2
 from ..types import MotionClip
 from .beats import StreamingBeatTracker
 from .sources import AudioSource, wait_for_audio
@@ -42,6 +43,7 @@ class LiveConfig:
     stall_s: float | None = None       # feed silence after this long without audio (default: one segment)
     first_audio_timeout_s: float = 20.0
     render: EngineConfig = field(default_factory=EngineConfig)
+    follow_signature: bool = False     # keep the genre's motif signature (engines/graph/signature.py)
 
 
 @dataclass(frozen=True)
@@ -155,8 +157,9 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
                     break
                 style, _ = choose_style(db, tempo if tempo > 0 else 100.0, config.style)
                 graph, _ = load_graph(style)
-                worker = _Worker(GraphEngine(style, graph, config.render, fps=config.fps), config.seed,
-                                 on_frames, on_report, t0, config.fps)
+                worker = _Worker(GraphEngine(style, graph, config.render, fps=config.fps,
+                                             signature=_signature(config, db, style, graph)),
+                                 config.seed, on_frames, on_report, t0, config.fps)
                 beats, inten = _cover_start(beats, inten, tempo)
                 prev_beat = float(beats[0])
                 beats, inten = beats[1:], inten
@@ -185,7 +188,9 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
         executor.shutdown(wait=True, cancel_futures=True)
     reports = worker.reports if worker else []
     steps = [r.process_s for r in reports]
+    counts = worker.state.motif_counts if worker else None
     return {
+        "motif_chi2": chi2(worker.engine.signature.template, counts) if counts is not None and counts.sum() else None,
         "style": worker.engine.style.name if worker else None,
         "tempo_bpm": tempo,
         "heard_s": heard_s,
@@ -200,6 +205,15 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
         "first_motion_ready_s": reports[0].ready_s if reports else None,
         "first_audio_s": reports[0].audio_end_s if reports else None,
     }
+
+
+def _signature(config: LiveConfig, db, style, graph):
+    if not config.follow_signature:
+        return None
+    from ..engines.graph.signature import signature_target
+    from ..motion.motifs import load_motif_model
+
+    return signature_target(style, graph, load_motif_model(db), config.render.signature_weight)
 
 
 def _cover_start(beats: np.ndarray, inten: np.ndarray, tempo: float) -> tuple[np.ndarray, np.ndarray]:

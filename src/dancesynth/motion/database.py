@@ -103,6 +103,19 @@ class Style:
                           meta={"name": self.clip_names[index], "source": self.clip_sources[index],
                                 "style": self.name, "beat_frames": beats})
 
+    def without_clip(self, index: int) -> "Style":
+        """The style with clip ``index`` left out (held-out evaluations: re-create a dance not in the style)."""
+        a, b = int(self.clip_starts[index]), int(self.clip_starts[index + 1])
+        keep = np.r_[0:a, b:self.n_frames]
+        beats = self.beat_frames[(self.beat_frames < a) | (self.beat_frames >= b)]
+        return Style(self.name, self.genre, self.skeleton, self.fps,
+                     self.clip_names[:index] + self.clip_names[index + 1:],
+                     self.clip_sources[:index] + self.clip_sources[index + 1:],
+                     np.r_[self.clip_starts[:index + 1], self.clip_starts[index + 2:] - (b - a)],
+                     self.local_rot[keep], self.root_pos[keep], self.contacts[keep], self.energy[keep],
+                     np.where(beats >= b, beats - (b - a), beats), np.delete(self.clip_tempo_bpm, index),
+                     f"{self.fingerprint}-without-{index}")
+
 
 @dataclass(eq=False)
 class MotionDatabase:

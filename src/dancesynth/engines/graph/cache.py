@@ -19,7 +19,7 @@ from ...motion.database import Style, cache_dir
 from . import meta_graph
 from .meta_graph import GRAPH_FORMAT_VERSION, GraphConfig, MetaMotionGraph, build_graph
 
-_SCALARS = ("style", "fps", "thr", "n_forced")
+_SCALARS = ("style", "fps", "thr", "n_forced", "n_trapped")
 
 
 # The code that builds graphs is part of the key: editing it can never serve a stale graph.

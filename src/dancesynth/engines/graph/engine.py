@@ -9,6 +9,10 @@ same step over a whole song.
 
 Global (the authors' earlier, offline method, our baseline): one search over the
 whole song with intensities standardised over the whole song.
+
+With a ``SignatureTarget`` (``signature.py``, beyond the paper) the streaming step
+also favours words whose motif the dance owes its genre's template, and counts the
+motifs it danced in its state.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ from ..footlock import FootLockState, lock_feet
 from ..stitch import Pieces, Rendered, StitchState, render
 from .meta_graph import MetaMotionGraph
 from .search import Path, search
+from .signature import DEFAULT_WEIGHT, SignatureTarget
 
 
 @dataclass(frozen=True)
@@ -48,6 +53,7 @@ class EngineConfig:
     repeat_half_life_beats: float = 32.0
     foot_lock: bool = True            # hold planted feet still through blends (leg IK)
     jump_cost: float = 0.25           # added to every jump (0 = paper): fewer, better-motivated jumps
+    signature_weight: float = DEFAULT_WEIGHT  # cost scale of a motif not owed, when following a signature
 
     @classmethod
     def paper(cls) -> "EngineConfig":
@@ -67,6 +73,7 @@ class StreamState:
     stitch: StitchState = field(default_factory=StitchState)
     feet: FootLockState = field(default_factory=FootLockState)
     segments: int = 0
+    motif_counts: np.ndarray | None = None  # (K,) motifs danced so far, when the engine has a signature
 
 
 @dataclass(frozen=True)
@@ -81,11 +88,14 @@ class SegmentFrames:
     pieces: Pieces
     search_s: float = 0.0   # time spent in the path search (the paper's "synthesis")
     render_s: float = 0.0   # time spent turning the path into frames
+    motifs: np.ndarray | None = None  # (beats,) motif of the word danced on each beat, when known
 
     @classmethod
     def of(cls, frames: Rendered, local_rot: np.ndarray, path: Path, pieces: Pieces,
-           search_s: float, render_s: float) -> "SegmentFrames":
-        return cls(local_rot, frames.root_pos, frames.contacts, frames.source_pos, path, pieces, search_s, render_s)
+           search_s: float, render_s: float, signature: SignatureTarget | None = None) -> "SegmentFrames":
+        motifs = None if signature is None else signature.node_motif[path.nodes[1:]]
+        return cls(local_rot, frames.root_pos, frames.contacts, frames.source_pos, path, pieces, search_s, render_s,
+                   motifs)
 
 
 def standardise(values: np.ndarray, mean: float, std: float) -> np.ndarray:
@@ -104,6 +114,7 @@ class GraphEngine:
     graph: MetaMotionGraph
     config: EngineConfig = EngineConfig()
     fps: float = 30.0
+    signature: SignatureTarget | None = None  # follow a genre's motif signature (signature.py)
 
     def initial_state(self, seed: int | None = None, needed_beats: float = np.inf) -> StreamState:
         """Fresh state. Without a seed the first segment may start at any clip's first beat
@@ -134,6 +145,12 @@ class GraphEngine:
         thc = np.inf if segment.remaining_beats is None else float(segment.remaining_beats)
         recent = state.recent if state.recent is not None else np.zeros(self.graph.n_nodes)
         penalty = self.config.repeat_penalty * recent if self.config.repeat_penalty > 0 else None
+        counts = state.motif_counts
+        if self.signature is not None:
+            counts = np.zeros(len(self.signature.template)) if counts is None else counts
+            owed = self.signature.arrival_cost(counts)
+            if owed is not None:
+                penalty = owed if penalty is None else penalty + owed
         t0 = time.perf_counter()
         path = search(self.graph, standardise(inten, mean, std), np.diff(beats), start_nodes=start,
                       prev_duration_s=state.prev_duration_s, thc=thc, node_penalty=penalty,
@@ -150,8 +167,10 @@ class GraphEngine:
         local, feet = self._lock_feet(frames, state.feet)
         new_state = replace(state, node=int(path.nodes[-1]), prev_duration_s=float(beats[-1] - beats[-2]),
                             n_heard=n, mean_db=mean, m2_db=m2, stitch=stitch, segments=state.segments + 1,
-                            recent=recent, feet=feet)
-        return new_state, SegmentFrames.of(frames, local, path, pieces, t1 - t0, time.perf_counter() - t1)
+                            recent=recent, feet=feet,
+                            motif_counts=None if counts is None else self.signature.count(counts, path.nodes[1:]))
+        return new_state, SegmentFrames.of(frames, local, path, pieces, t1 - t0, time.perf_counter() - t1,
+                                           self.signature)
 
     def run_global(self, beat_times_s: np.ndarray, intensity_db: np.ndarray, end_s: float,
                    seed: int | None = None) -> SegmentFrames:
@@ -168,7 +187,7 @@ class GraphEngine:
         _, frames = render(self.style, pieces, state.stitch, fps=self.fps,
                            end_s=end_s, blend_s=self.config.blend_s, inclusive_end=True)
         local, _ = self._lock_feet(frames, state.feet)
-        return SegmentFrames.of(frames, local, path, pieces, t1 - t0, time.perf_counter() - t1)
+        return SegmentFrames.of(frames, local, path, pieces, t1 - t0, time.perf_counter() - t1, self.signature)
 
     def _lock_feet(self, frames: Rendered, feet: FootLockState):
         if not self.config.foot_lock:

@@ -47,11 +47,13 @@ class GraphConfig:
                                   # its most similar beat as an extra edge (see build_graph)
     max_joint_speed_deg_s: float = 1500.0  # beat intervals where a limb turns faster than this
                                            # hold capture glitches (wrist flips) and are not played
+    prune_trap_cycles: bool = True  # drop steps into small cycles the main cycle cannot be reached
+                                    # from (a dance that enters one loops there forever; see derive_steps)
 
     @classmethod
     def paper(cls) -> "GraphConfig":
         """Eq. (1)-(3) as printed: literal neighbouring frames, no limits on jumps."""
-        return cls(neighbour_s=0.0, max_jumps_per_beat=0, min_jump_beats=0)
+        return cls(neighbour_s=0.0, max_jumps_per_beat=0, min_jump_beats=0, prune_trap_cycles=False)
 
     def __post_init__(self):
         if not self.thr > 1.0:
@@ -82,6 +84,7 @@ class MetaMotionGraph:
     init_nodes: np.ndarray      # first beat of every clip (InitS)
     thr: float = 1.5            # THR the graph was built with
     n_forced: int = 0           # bi-directional edges added by close_dead_ends
+    n_trapped: int = 0          # beats of trap cycles no step leads into any more (prune_trap_cycles)
     # One step = optional jump + mono edge, sorted by destination for the search.
     step_src: np.ndarray = None
     step_via: np.ndarray = None
@@ -257,7 +260,7 @@ def build_graph(style: Style, config: GraphConfig = GraphConfig()) -> MetaMotion
         style=style.name, fps=style.fps, node_frame=frames, node_clip=clip, next_node=next_node,
         prev_node=prev_node, w1=w1, w1_z=w1_z, bi_src=src, bi_dst=dst, bi_rd=rd_e.astype(np.float64),
         capacity=np.zeros(n), init_nodes=np.flatnonzero(np.r_[True, clip[1:] != clip[:-1]]), thr=config.thr)
-    derive_steps(graph)
+    derive_steps(graph, config.prune_trap_cycles)
 
     if config.close_dead_ends and not np.isinf(graph.capacity[graph.init_nodes]).any():
         # No start can go on forever (a tiny database without cycles): link every dead end
@@ -272,12 +275,21 @@ def build_graph(style: Style, config: GraphConfig = GraphConfig()) -> MetaMotion
             graph.bi_dst = np.r_[graph.bi_dst, best, ends]
             graph.bi_rd = np.r_[graph.bi_rd, best_rd, best_rd]
             graph.n_forced = len(ends)
-            derive_steps(graph)
+            derive_steps(graph, config.prune_trap_cycles)
     return graph
 
 
-def derive_steps(g: MetaMotionGraph) -> None:
-    """Derive the step list (sorted by destination) and the capacities from nodes and edges."""
+def derive_steps(g: MetaMotionGraph, prune_traps: bool = False) -> None:
+    """Derive the step list (sorted by destination) and the capacities from nodes and edges.
+
+    With ``prune_traps``, steps into *trap cycles* are dropped: strongly connected
+    beats from which the graph's main cycle (its largest strongly connected
+    component) cannot be reached. Xu's capacity calls every node that reaches some
+    cycle infinite, so the search may enter a 4-beat loop and, with no way out,
+    dance it for the rest of the song. Motion graphs are usually cut to their
+    largest strongly connected component (Kovar et al. 2002); we keep every beat
+    that can still reach it, so dead-end tails stay usable near a song's end.
+    """
     n = g.n_nodes
     mono = np.flatnonzero(g.next_node >= 0)
     usable = g.next_node[g.bi_dst] >= 0  # a jump must be followed by a mono edge
@@ -287,6 +299,12 @@ def derive_steps(g: MetaMotionGraph) -> None:
     dst = g.next_node[via]
     w2 = np.r_[np.ones(len(mono)), np.maximum(g.bi_rd[usable], g.thr)]
     jump = np.r_[np.zeros(len(mono), bool), np.ones(len(jsrc), bool)]
+    g.n_trapped = 0
+    if prune_traps:
+        trapped = trap_nodes(n, src, dst)
+        keep = ~trapped[dst]
+        src, via, dst, w2, jump = src[keep], via[keep], dst[keep], w2[keep], jump[keep]
+        g.n_trapped = int(trapped.sum())
     f_next = g.frames_to_next()
     prev = g.prev_node[src]
     rho = np.full(len(src), np.nan)
@@ -301,6 +319,44 @@ def derive_steps(g: MetaMotionGraph) -> None:
     g.capacity = synchronization_capacity(n, g.step_src, g.step_dst)
 
 
+def _cyclic(n_nodes: int, src: np.ndarray, dst: np.ndarray):
+    """Strong components of a step graph: (csr adjacency, label per node, whether each node is on a cycle)."""
+    adj = coo_matrix((np.ones(len(src)), (src, dst)), shape=(n_nodes, n_nodes)).tocsr()
+    n_comp, label = connected_components(adj, directed=True, connection="strong")
+    cyclic = np.bincount(label, minlength=n_comp)[label] > 1
+    cyclic[src[src == dst]] = True
+    return adj, label, cyclic
+
+
+def _reaching(adj, n_nodes: int, seeds: np.ndarray) -> np.ndarray:
+    """(N,) True for every node from which one of ``seeds`` can be reached (seeds included)."""
+    out = np.zeros(n_nodes, bool)
+    if not len(seeds):
+        return out
+    radj = adj.T.tocoo()
+    super_src = n_nodes  # a virtual node pointing to every seed
+    aug = coo_matrix((np.ones(len(seeds) + radj.nnz), (np.r_[np.full(len(seeds), super_src), radj.row],
+                                                       np.r_[seeds, radj.col])),
+                     shape=(n_nodes + 1, n_nodes + 1)).tocsr()
+    reached = breadth_first_order(aug, super_src, directed=True, return_predecessors=False)
+    out[reached[reached < n_nodes]] = True
+    return out
+
+
+def trap_nodes(n_nodes: int, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """(N,) True for nodes on a cycle from which the largest strongly connected component is out of reach."""
+    src = np.asarray(src, dtype=np.int64)
+    dst = np.asarray(dst, dtype=np.int64)
+    if n_nodes == 0 or not len(src):
+        return np.zeros(n_nodes, bool)
+    adj, label, cyclic = _cyclic(n_nodes, src, dst)
+    if not cyclic.any():
+        return np.zeros(n_nodes, bool)
+    sizes = np.bincount(label[cyclic])
+    main = np.flatnonzero(label == int(np.argmax(sizes)))
+    return cyclic & ~_reaching(adj, n_nodes, main)
+
+
 def synchronization_capacity(n_nodes: int, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     """Capacity of every node of a step graph (edges ``src -> dst``), in beats.
 
@@ -312,22 +368,9 @@ def synchronization_capacity(n_nodes: int, src: np.ndarray, dst: np.ndarray) -> 
     cap = np.zeros(n_nodes)
     if n_nodes == 0:
         return cap
-    adj = coo_matrix((np.ones(len(src)), (src, dst)), shape=(n_nodes, n_nodes)).tocsr()
-    n_comp, label = connected_components(adj, directed=True, connection="strong")
-    size = np.bincount(label, minlength=n_comp)
-    cyclic = size[label] > 1
-    cyclic[src[src == dst]] = True
+    adj, _, cyclic = _cyclic(n_nodes, src, dst)
     # Everything that can reach a cyclic node can go on forever.
-    forever = np.zeros(n_nodes, bool)
-    if cyclic.any():
-        radj = adj.T.tocsr()
-        super_src = n_nodes  # a virtual node pointing to every cyclic node
-        seeds = np.flatnonzero(cyclic)
-        aug = coo_matrix((np.ones(len(seeds) + radj.nnz),
-                          (np.r_[np.full(len(seeds), super_src), radj.tocoo().row],
-                           np.r_[seeds, radj.tocoo().col])), shape=(n_nodes + 1, n_nodes + 1)).tocsr()
-        reached = breadth_first_order(aug, super_src, directed=True, return_predecessors=False)
-        forever[reached[reached < n_nodes]] = True
+    forever = _reaching(adj, n_nodes, np.flatnonzero(cyclic))
     cap[forever] = np.inf
     # The rest is a DAG: relax longest-path-to-a-sink until nothing changes.
     finite_edges = ~forever[src]

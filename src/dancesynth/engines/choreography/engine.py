@@ -1,0 +1,150 @@
+"""``dance --engine choreography``: song -> beat grid -> one motif per beat -> real words, stitched.
+
+Aristidou et al.'s global structure without the learned pose generator: the
+choreography level (``level.py``, eq. 5) chooses a motif per beat so the dance's
+signature follows its genre's template -- or follows the user's constraints
+(``--motif-at``) or a reference dance's motif sequence (``--recreate``, §5.5.1) --
+and the mixer (``mixer.py``, §5.2.5) dances each motif with a real word of the
+style's mocap, time-scaled to the beat.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...errors import InputError
+from ...motion.database import MotionDatabase, Style
+from ...motion.motifs import chi2, load_motif_model, parse_motif_id
+from ...motion.words import clip_words
+from ...types import MotionClip, MusicFeatures
+from ..beatgrid import beat_grid, choose_style
+from .level import constraint_beats, parse_motif_at, plan_motifs, recreate_plan
+from .mixer import Mix, MixerConfig, mix, substitute_motifs, word_bank
+
+_BANKS: dict = {}  # (style, model) -> WordBank: cutting and embedding a style's words takes seconds
+
+
+def style_bank(style: Style, model):
+    key = (style.name, style.fingerprint, style.n_frames, model.k, hash(np.asarray(model.centroids).tobytes()))
+    if key not in _BANKS:
+        _BANKS.clear()  # one at a time: a bank holds every word of a style
+        _BANKS[key] = word_bank(style, model)
+    return _BANKS[key]
+
+
+@dataclass(frozen=True)
+class Reference:
+    """A reference dance for re-creation: its motif per word, the genre its signature is nearest,
+    and the styles on its skeleton."""
+
+    path: str
+    motifs: np.ndarray
+    genre: str
+    styles: tuple[Style, ...]
+
+
+def reference_motifs(path, model, styles) -> Reference:
+    """Read a reference BVH, check it is on the skeleton of one of ``styles``, cut it into words
+    at its kinematic beats (as ``dancesynth motifs`` does) and assign each word its motif.
+
+    ``InputError`` if it is unreadable, on another skeleton, or too short for a word.
+    """
+    from ...io.bvh import read_bvh
+
+    clip = read_bvh(path)
+    names = tuple(clip.skeleton.names)
+    same = tuple(s for s in styles if tuple(s.skeleton.names) == names)
+    if not same:
+        skeletons = sorted({f"{s.skeleton.n_joints} joints ({s.name})" for s in styles})
+        raise InputError(f"the reference {path} is on a skeleton of {len(names)} joints ({', '.join(names[:4])}, "
+                         f"...) that no style uses ({'; '.join(skeletons)}): re-create from a dance captured "
+                         "on one of those skeletons")
+    ids = model.assign(clip_words(clip).features)
+    return Reference(str(path), ids, model.nearest_genre(model.signature(ids)), same)
+
+
+def _choose(db: MotionDatabase, tempo_bpm: float, name: str | None, ref: Reference | None):
+    """The style to dance: the best tempo match, on the reference's skeleton and genre when re-creating."""
+    if ref is None:
+        return choose_style(db, tempo_bpm, name)
+    same = list(ref.styles)
+    if name is None and any(s.genre == ref.genre for s in same):
+        same = [s for s in same if s.genre == ref.genre]
+    return choose_style(MotionDatabase({s.name: s for s in same}, db.source), tempo_bpm)
+
+
+def _check_constraints(fixed: dict, bank, style: Style) -> None:
+    missing = sorted({m for m in fixed.values() if not np.any(bank.motif == m)})
+    if missing:
+        raise InputError(f"style '{style.name}' has no word of motif {', '.join(f'M{m}' for m in missing)}; "
+                         f"its motifs are {', '.join(f'M{m}' for m in np.unique(bank.motif))} -- choose one of "
+                         "those or another --style ('dancesynth motifs' shows a dance's motifs)")
+
+
+def choreography_dance(music: MusicFeatures, db: MotionDatabase, config, *, song: str, timings: dict,
+                       motif_model=None, mixer: MixerConfig = MixerConfig()) -> MotionClip:
+    """``api.dance`` for ``config.engine == "choreography"``.
+
+    ``config`` is a ``DanceConfig``: ``motif_at`` (``"12.0=M17"`` strings or ``(seconds,
+    motif)`` pairs) and ``recreate`` (a reference BVH path) are the user's constraints.
+    """
+    t = time.perf_counter()
+    model = motif_model if motif_model is not None else load_motif_model(db)
+    pool = db.styles_of(config.style) if config.style else list(db.styles.values())
+    ref = reference_motifs(config.recreate, model, pool) if config.recreate else None
+    constraints = [parse_motif_at(c, model.k) if isinstance(c, str)
+                   else (float(c[0]), parse_motif_id(str(c[1]), model.k)) for c in config.motif_at]
+    style, subdivide = _choose(db, music.tempo_bpm, config.style, ref)
+    bank = style_bank(style, model)
+    timings["graph_s"] = time.perf_counter() - t  # the motif stage takes the graph's place
+
+    t = time.perf_counter()
+    grid = beat_grid(music, subdivide=subdivide)
+    n = grid.n_intervals
+    rng = np.random.default_rng(0 if config.seed is None else int(config.seed))
+    fixed = constraint_beats(constraints, grid.times_s, music.duration_s)
+    _check_constraints(fixed, bank, style)
+    if ref is not None:  # the reference's sequence; --motif-at beats, if any, override it
+        plan = recreate_plan(ref.motifs, n)
+        plan[list(fixed)] = list(fixed.values())
+    else:
+        plan = plan_motifs(n, model.templates[style.genre], model.transitions[style.genre], rng, fixed=fixed)
+    danced = substitute_motifs(bank, model.centroids)[plan]
+    result = mix(style, bank, danced, grid.times_s, music.duration_s, fps=config.fps, rng=rng, config=mixer)
+    timings["synthesis_s"] = time.perf_counter() - t
+    return _clip(style, music, grid, result, plan, fixed, subdivide, model, song=song, config=config,
+                 timings=timings, ref=ref)
+
+
+def _clip(style, music, grid, result: Mix, plan, fixed, subdivide, model, *, song, config, timings, ref):
+    p = result.pieces
+    jumps = p.t0[p.jump]
+    jumps = jumps[(jumps >= 0.0) & (jumps < music.duration_s)]
+    template = model.templates[style.genre]
+    summary = {
+        "song": song, "duration_s": music.duration_s, "tempo_bpm": music.tempo_bpm, "beats": music.n_beats,
+        "beat_confidence": music.beat_confidence, "default_tempo": music.default_tempo,
+        "style": style.name, "genre": style.genre, "subdivide": subdivide, "engine": "choreography", "segments": 1,
+        "segment_s": music.duration_s, "transitions": int(len(jumps)), "graph_cached": True,
+        "frames": len(result.local_rot), "fps": config.fps, "timings_s": timings,
+        "step_s_median": timings["synthesis_s"], "step_s_max": timings["synthesis_s"],
+        "motifs": model.k, "motif_chi2": chi2(template, model.signature(result.motifs)),
+        "plan_followed": float(np.mean(result.motifs == plan)), "constraints": len(fixed),
+        "recreate": None if ref is None else ref.path,
+    }
+    meta = {
+        "summary": summary, "style": style.name,
+        "music_beat_times_s": music.beat_times_s, "grid_times_s": grid.times_s,
+        "transition_times_s": jumps, "segment_times_s": np.zeros(0),
+        "source_frames": result.source_frames,
+        "warp_rates": (p.f1 - p.f0) / (p.t1 - p.t0) / style.fps,
+        "motif_ids": result.motifs, "motif_plan": plan,
+        "motif_constraints": {int(b): int(m) for b, m in fixed.items()},
+        "word_frames": np.stack([p.f0, p.f1], axis=1).astype(np.int64),
+    }
+    return MotionClip(style.skeleton, config.fps, result.root_pos, result.local_rot,
+                      contacts=result.contacts, meta=meta)
+

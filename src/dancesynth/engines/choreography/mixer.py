@@ -1,0 +1,188 @@
+"""The choreography mixer (Aristidou et al. §5.2.5): real motion words, one per beat.
+
+For each beat interval of the music the choreography level has chosen a motif. Its
+cluster members -- the real words of the chosen style that the motif model assigns
+to it -- are the candidates; the one whose first poses best continue the previous
+word's last poses (joint rotations and their velocities) is danced, time-scaled so
+that its two motion beats fall on the interval's two music beats.
+
+Each chosen word is a "piece" of source frames for ``stitch.render``, which already
+does what the paper's blending step needs: a word that does not continue where the
+previous one ended in the mocap is re-placed on the floor (heading and position
+continue) and blended in by inertialization; planted feet are then held by the
+two-bone IK of ``footlock``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ... import rotations as rot
+from ...kinematics import fk
+from ...motion.database import Style
+from ...motion.motifs import style_motifs
+from ...motion.roles import find_roles
+from ...motion.words import MotionWords
+from ..footlock import FootLockState, lock_feet
+from ..stitch import Pieces, StitchState, render
+
+
+@dataclass(frozen=True)
+class MixerConfig:
+    blend_s: float = 0.2           # inertialization time where words do not continue each other
+    velocity_s: float = 0.1        # a velocity difference counts as the pose change over this time
+    tempo_weight: float = 2.0      # cost per (log2 time-warp rate)^2: prefer words of the beat's length
+    jump_cost: float = 0.5         # added to every stitch that is not the mocap's own continuation
+    foot_lock: bool = True
+    unlock_s: float = 0.15         # a foot moved by a stitch is free this long (see ``_released``)
+    unlock_tol_m: float = 0.05
+
+
+@dataclass(frozen=True)
+class WordBank:
+    """A style's words, their motifs, and the poses at their ends for matching.
+
+    ``start_pose``/``end_pose`` are joint rotation matrices flattened (W, J*9) with the
+    root's heading removed (the mixer re-places every word facing where the dancer
+    faces), so ``‖a − b‖²`` ≈ the summed squared joint angles between two poses;
+    ``start_vel``/``end_vel`` are their time derivatives (per second, source time).
+    """
+
+    words: MotionWords
+    motif: np.ndarray        # (W,)
+    start_pose: np.ndarray
+    end_pose: np.ndarray
+    start_vel: np.ndarray
+    end_vel: np.ndarray
+    fps: float
+
+    def __len__(self) -> int:
+        return len(self.motif)
+
+    def duration_s(self, w) -> np.ndarray:
+        return (self.words.end[w] - self.words.start[w]) / self.fps
+
+
+def _pose_vectors(style: Style, frames: np.ndarray) -> np.ndarray:
+    q = style.local_rot[frames].astype(np.float64)
+    root = q[:, 0]
+    q = q.copy()
+    q[:, 0] = rot.mul(rot.inv(rot.about_y(rot.heading(root))), root)  # tilt only
+    mats = Rotation.from_quat(q.reshape(-1, 4)).as_matrix()
+    return mats.reshape(len(frames), -1)
+
+
+def word_bank(style: Style, motif_model) -> WordBank:
+    """Every word of ``style``, assigned to the motifs of ``motif_model``."""
+    words, motif = style_motifs(style, motif_model)
+    s, e = words.start, words.end
+    # A word spans at least two frames of one clip, so start+1 and end-1 stay inside it.
+    start_pose, after_start = _pose_vectors(style, s), _pose_vectors(style, s + 1)
+    end_pose, before_end = _pose_vectors(style, e), _pose_vectors(style, e - 1)
+    return WordBank(words, motif, start_pose, end_pose, (after_start - start_pose) * style.fps,
+                    (end_pose - before_end) * style.fps, style.fps)
+
+
+def substitute_motifs(bank: WordBank, centroids: np.ndarray) -> np.ndarray:
+    """``(K,)`` the motif to dance for each motif: itself if the style has a word of it, else
+    the motif with words in this style whose centroid is nearest (motifs are shared by
+    all genres; a style need not have every one)."""
+    centroids = np.asarray(centroids, dtype=float)
+    present = np.unique(bank.motif)
+    d = np.linalg.norm(centroids[:, None, :] - centroids[None, present, :], axis=-1)
+    return present[np.argmin(d, axis=1)]
+
+
+def _match(bank: WordBank, prev: np.ndarray, cand: np.ndarray, config: "MixerConfig") -> np.ndarray:
+    """(len(prev), len(cand)) cost of dancing ``cand`` right after ``prev``: 0 where the mocap
+    itself continues that way, else the pose + velocity difference plus ``jump_cost``."""
+    def sq(a, b):  # squared distances between rows, (len(a), len(b))
+        return np.maximum((a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * a @ b.T, 0.0)
+
+    cost = (sq(bank.end_pose[prev], bank.start_pose[cand])
+            + config.velocity_s ** 2 * sq(bank.end_vel[prev], bank.start_vel[cand]) + config.jump_cost)
+    return np.where(bank.words.end[prev][:, None] == bank.words.start[cand][None, :], 0.0, cost)
+
+
+def choose_words(bank: WordBank, motifs: np.ndarray, durations_s: np.ndarray, rng: np.random.Generator,
+                 config: MixerConfig = MixerConfig()) -> np.ndarray:
+    """The word (index into ``bank``) danced on each beat interval, one of that beat's motif.
+
+    The paper picks, beat by beat, the word whose first poses best continue the previous
+    word. We minimise the same stitch cost over the whole song at once (Viterbi over
+    each beat's candidates), so a choice that leaves the next beat only bad
+    continuations is avoided, and runs of words that follow each other in the mocap
+    are found wherever the plan allows them. A word's length far from its beat's costs
+    ``tempo_weight`` per (log2 time-warp rate)^2; the seed breaks ties at the start.
+    """
+    members = {int(m): np.flatnonzero(bank.motif == m) for m in np.unique(motifs)}
+    log_len = np.log2(bank.duration_s(np.arange(len(bank))))
+    cands = [members[int(m)] for m in motifs]
+    unary = [config.tempo_weight * (log_len[c] - np.log2(d)) ** 2 for c, d in zip(cands, durations_s)]
+    total = unary[0] + 1e-3 * rng.random(len(cands[0]))  # where the dance starts is the seed's choice
+    back = []
+    for i in range(1, len(motifs)):
+        step = total[:, None] + _match(bank, cands[i - 1], cands[i], config)
+        back.append(np.argmin(step, axis=0))
+        total = step[back[-1], np.arange(len(cands[i]))] + unary[i]
+    pick = [int(np.argmin(total))]
+    for b in reversed(back):
+        pick.append(int(b[pick[-1]]))
+    pick.reverse()
+    return np.array([c[k] for c, k in zip(cands, pick)], dtype=np.int64)
+
+
+def _released(style: Style, frames, fps: float, config: MixerConfig) -> np.ndarray:
+    """(F, 2) frames where a foot is not held: ``unlock_s`` after a stitch that moves it.
+
+    Words are re-placed at most beats. Where the new word puts a planted foot elsewhere
+    than the old word had it (by more than ``unlock_tol_m``), holding it would pull the
+    leg towards the old place and the IK would snap it; the hold is released (it fades
+    out) and taken up again where the new word plants the foot.
+    """
+    first = np.flatnonzero(frames.new_run)
+    first = first[first > 0]
+    out = np.zeros(frames.contacts.shape, dtype=bool)
+    if not first.size:
+        return out
+    sk = style.skeleton
+    ankles = list(find_roles(sk).ankles)
+    idx = np.r_[first - 1, first]
+    _, pos = fk(frames.raw_local[idx], frames.raw_root[idx], sk.offsets, sk.parents, only=ankles)
+    moved = np.linalg.norm(pos[len(first):, ankles] - pos[:len(first), ankles], axis=-1) > config.unlock_tol_m
+    span = max(1, int(round(config.unlock_s * fps)))
+    for f, m in zip(first, moved):
+        out[f:f + span, m] = True
+    return out
+
+
+@dataclass(frozen=True)
+class Mix:
+    local_rot: np.ndarray
+    root_pos: np.ndarray
+    contacts: np.ndarray
+    source_frames: np.ndarray
+    pieces: Pieces
+    words: np.ndarray        # (B,) index into the bank per beat interval
+    motifs: np.ndarray       # (B,) motif of the danced word
+
+
+def mix(style: Style, bank: WordBank, motifs: np.ndarray, beat_times_s: np.ndarray, end_s: float, *,
+        fps: float, rng: np.random.Generator, config: MixerConfig = MixerConfig()) -> Mix:
+    """Dance ``motifs[i]`` on beat interval ``beat_times_s[i] → [i+1]``, rendered up to ``end_s``."""
+    times = np.asarray(beat_times_s, dtype=np.float64)
+    chosen = choose_words(bank, np.asarray(motifs), np.diff(times), rng, config)
+    f0 = bank.words.start[chosen].astype(np.float64)
+    f1 = bank.words.end[chosen].astype(np.float64)
+    jump = np.r_[False, bank.words.start[chosen[1:]] != bank.words.end[chosen[:-1]]]
+    pieces = Pieces(times[:-1], times[1:], f0, f1, jump)
+    _, frames = render(style, pieces, StitchState(), fps=fps, end_s=end_s, blend_s=config.blend_s,
+                       inclusive_end=True)
+    local = frames.local_rot
+    if config.foot_lock:
+        held = replace(frames, contacts=frames.contacts & ~_released(style, frames, fps, config))
+        local, _ = lock_feet(style.skeleton, find_roles(style.skeleton), held, FootLockState(), fps=fps)
+    return Mix(local, frames.root_pos, frames.contacts, frames.source_pos, pieces, chosen, bank.motif[chosen])

@@ -1,0 +1,157 @@
+"""Dancing with the learned pose generator (``dance --engine neural``).
+
+song -> beat grid and per-beat intensity -> one target motif per beat (the
+choreography level) -> the acLSTM runs frame by frame at ``data.TRAIN_FPS``, told
+the phase of the music's beat, the beat's motif and, through AdaIN, the beat's
+intensity -> poses decoded, resampled to the output rate, planted feet held with IK.
+
+Beats land on the music because the generator is conditioned on the music's beat
+phase: it learned from the mocap that a motion beat (a pose where the body's
+motion turns) falls at phase 0.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ...errors import ModelError
+from ...kinematics import fk
+from ...motion.beats import kinematic_beats, summed_speed
+from ...motion.database import MotionDatabase
+from ...motion.features import foot_contacts, foot_points
+from ...motion.resample import sample_frames
+from ...motion.roles import find_roles
+from ...types import MotionClip, MusicFeatures
+from ..beatgrid import beat_grid, choose_style
+from ..footlock import FootLockState, lock_feet
+from ..stitch import Rendered
+from .data import TRAIN_FPS, beat_features, beat_phase, decode_pose, hamming_weights, music_vectors
+from .store import StoredModel, find_model, load_model
+
+DEFAULT_GENRE = "salsa"   # the genre of the shipped model
+
+
+def motif_plan(n_beats: int, template, transitions, rng: np.random.Generator) -> np.ndarray:
+    """One target motif per beat interval by the choreography level's eq. (5); -1s without motifs."""
+    if template is None:
+        return np.full(n_beats, -1)
+    from ..choreography.level import plan_motifs
+
+    return plan_motifs(n_beats, template, transitions, rng)
+
+
+def beat_warp(motion_beats_s: np.ndarray, music_beats_s: np.ndarray, *, reach: float = 0.5,
+              rates=(0.67, 1.5)) -> tuple[np.ndarray, np.ndarray]:
+    """Anchors ``(music_s, motion_s)`` of a light time-warp that puts generated beats on music beats.
+
+    Each music beat takes the nearest generated motion beat within ``reach`` of its
+    beat period; anchors that would run time backwards or change the playback rate
+    outside ``rates`` are dropped. Between anchors time is interpolated linearly.
+    """
+    m = np.asarray(music_beats_s, dtype=float)
+    g = np.asarray(motion_beats_s, dtype=float)
+    if len(m) < 2 or len(g) == 0:
+        return np.zeros(0), np.zeros(0)
+    period = np.gradient(m)
+    j = np.clip(np.searchsorted(g, m), 1, len(g)) - 1
+    j = np.where((j + 1 < len(g)) & (np.abs(g[np.minimum(j + 1, len(g) - 1)] - m) < np.abs(g[j] - m)), j + 1, j)
+    keep = np.abs(g[j] - m) <= reach * period
+    am, ag = [], []
+    for mi, gi in zip(m[keep], g[j[keep]]):
+        if am and not (rates[0] <= (gi - ag[-1]) / (mi - am[-1]) <= rates[1]):
+            continue
+        am.append(mi)
+        ag.append(gi)
+    return np.array(am), np.array(ag)
+
+
+def _warp_positions(t_out: np.ndarray, anchors) -> np.ndarray:
+    """Motion times for output times: the anchors' piecewise-linear map, shifted beyond its ends."""
+    am, ag = anchors
+    if len(am) == 0:
+        return t_out.copy()
+    src = np.interp(t_out, am, ag)
+    src = np.where(t_out < am[0], t_out + (ag[0] - am[0]), src)
+    return np.where(t_out > am[-1], t_out + (ag[-1] - am[-1]), src)
+
+
+def generate(model: StoredModel, music: MusicFeatures, grid, motifs: np.ndarray, *, fps: float,
+             seed: int = 0) -> MotionClip:
+    """Run the generator over ``grid`` (a ``BeatGrid``) and return the dance at ``fps``."""
+    import torch
+
+    gen = model.generator
+    n = int(np.floor(music.duration_s * TRAIN_FPS)) + int(TRAIN_FPS)   # a second to spare for the warp
+    k, phase, length_s = beat_phase(n, grid.times_s * TRAIN_FPS, TRAIN_FPS)
+    eye = np.eye(max(gen.n_motifs, 1), dtype=np.float32)[:, :gen.n_motifs]
+    motif = eye[np.maximum(motifs[k], 0)] * (motifs[k] >= 0)[:, None]
+    cond = torch.as_tensor(np.concatenate([beat_features(phase, length_s), motif], axis=1))
+    music_w = torch.as_tensor(music_vectors(grid.intensity_db, np.diff(grid.times_s))[k])
+    window = torch.as_tensor(hamming_weights(phase))
+    rng = np.random.default_rng(seed)
+    start = model.start_poses[rng.integers(len(model.start_poses))]
+    prev = torch.as_tensor((start - model.mean) / model.std, dtype=torch.float32)[None]
+    out = np.empty((n, len(model.mean)), dtype=np.float32)
+    with torch.inference_mode():
+        state = gen.initial_state(1)
+        for t in range(n):
+            y, state = gen.step(prev, cond[t:t + 1], music_w[t:t + 1], window[t:t + 1], state)
+            prev = gen.feedback(y)
+            out[t] = prev[0].numpy()
+    poses = out * model.std + model.mean
+    local, root, contacts = decode_pose(poses, TRAIN_FPS)
+    sk = model.skeleton
+    # Two passes of the beat warp: warping moves speed minima a little, the second pass catches them.
+    n_out = int(np.floor(music.duration_s * fps - 1e-9)) + 1
+    t_out = np.arange(n_out) / fps
+    src_s = t_out.copy()
+    for _ in range(2):
+        w_local, w_root, _ = sample_frames(local, root, np.clip(src_s, 0.0, (n - 1) / TRAIN_FPS) * TRAIN_FPS)
+        _, pos = fk(w_local, w_root, sk.offsets, sk.parents)
+        beats_s = kinematic_beats(summed_speed(pos, fps), fps)[0] / fps
+        anchors = beat_warp(beats_s, grid.times_s)   # the grid beats the generator was told (phase 0)
+        src_s = np.interp(_warp_positions(t_out, anchors), t_out, src_s)
+    src_s = np.clip(src_s, 0.0, (n - 1) / TRAIN_FPS)
+    local, root, _ = sample_frames(local, root, src_s * TRAIN_FPS, contacts)
+    # The feet the generated motion itself plants (low and slow), found as in the database's
+    # analysis: more reliable than the network's own contact outputs after a short training.
+    roles = find_roles(sk)
+    contacts = foot_contacts(foot_points(MotionClip(sk, fps, root, local), roles), fps)
+    frames = Rendered(local, root, contacts, np.zeros(n_out), local, root,
+                      # no source motion to follow: every frame is a "new run", so a planted foot stays put
+                      new_run=np.ones(n_out, dtype=bool))
+    local, _ = lock_feet(sk, roles, frames, FootLockState(), fps=fps)
+    return MotionClip(sk, fps, root, local, contacts=contacts,
+                      meta={"motifs": motifs, "grid_times_s": grid.times_s,
+                            "warp_rates": np.diff(src_s) * fps, "warp_anchors_s": anchors[0]})
+
+
+def neural_dance(music: MusicFeatures, db: MotionDatabase, config, *, song: str, timings: dict) -> MotionClip:
+    """``api.dance`` for ``config.engine == "neural"``: choose style and model, generate, summarise."""
+    t = time.perf_counter()
+    style, subdivide = choose_style(db, music.tempo_bpm, config.style or DEFAULT_GENRE)
+    model = load_model(find_model(style.genre))
+    if model.skeleton.names != style.skeleton.names:
+        raise ModelError(f"the neural model {model.path} was trained on another skeleton than style "
+                         f"'{style.name}'; retrain it with 'dancesynth train --style {style.genre}'")
+    timings["graph_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    grid = beat_grid(music, subdivide=subdivide)
+    seed = 0 if config.seed is None else int(config.seed)
+    motifs = motif_plan(grid.n_intervals, model.template, model.transitions, np.random.default_rng(seed))
+    clip = generate(model, music, grid, motifs, fps=config.fps, seed=seed)
+    timings["synthesis_s"] = time.perf_counter() - t
+    clip.meta.update({
+        "summary": {
+            "song": song, "duration_s": music.duration_s, "tempo_bpm": music.tempo_bpm, "beats": music.n_beats,
+            "beat_confidence": music.beat_confidence, "default_tempo": music.default_tempo,
+            "style": style.name, "subdivide": subdivide, "engine": "neural", "segments": 1,
+            "segment_s": music.duration_s, "transitions": 0, "graph_cached": True, "frames": clip.n_frames,
+            "fps": config.fps, "timings_s": timings, "model": str(model.path),
+            "step_s_median": timings["synthesis_s"], "step_s_max": timings["synthesis_s"],
+            "realtime_factor": music.duration_s / max(timings["synthesis_s"], 1e-9)},
+        "music_beat_times_s": music.beat_times_s, "transition_times_s": np.zeros(0),
+        "segment_times_s": np.zeros(0), "style": style.name})
+    return clip

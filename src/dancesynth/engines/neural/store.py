@@ -1,0 +1,104 @@
+"""Saving and finding trained pose generators.
+
+A model is one ``<genre>.pt`` file (torch's zip format, loaded with
+``weights_only=True``: tensors and plain values, never pickled code) with a
+``<genre>.json`` beside it saying how it was trained (config, data, loss curve).
+Models trained with ``dancesynth train`` go to the user cache and take precedence
+over the ones shipped in ``dancesynth/data/models/neural``.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ...errors import ModelError
+from ...io.files import atomic_output
+from ...motion.database import _skeleton_from_json, _skeleton_to_json, cache_dir
+from ...types import Skeleton
+
+SHIPPED = Path(__file__).resolve().parents[2] / "data" / "models" / "neural"
+FORMAT = 1
+
+
+def user_dir() -> Path:
+    return cache_dir() / "models" / "neural"
+
+
+def find_model(genre: str) -> Path:
+    """The model file for ``genre``: the user's own (``dancesynth train``) or the shipped one."""
+    for folder in (user_dir(), SHIPPED):
+        if (folder / f"{genre}.pt").is_file():
+            return folder / f"{genre}.pt"
+    shipped = sorted(p.stem for p in SHIPPED.glob("*.pt"))
+    raise ModelError(f"no neural model for genre '{genre}' (shipped: {', '.join(shipped) or 'none'}); "
+                     f"train one with 'dancesynth train --style {genre}' or dance another style")
+
+
+@dataclass
+class StoredModel:
+    generator: object            # model.PoseGenerator, in eval mode
+    skeleton: Skeleton
+    mean: np.ndarray
+    std: np.ndarray
+    genre: str
+    info: dict                   # config, motif source, metrics
+    start_poses: np.ndarray      # (S, P) real poses at motion beats to start a dance from
+    path: Path
+    template: np.ndarray | None = None      # (K,) the genre's motif signature when trained ...
+    transitions: np.ndarray | None = None   # (K, K) ... and its motif transitions
+
+
+def save_model(path: Path, generator, skeleton: Skeleton, mean, std, genre: str, info: dict,
+               start_poses: np.ndarray, template=None, transitions=None) -> None:
+    """Write ``path`` (.pt) and its .json summary atomically."""
+    import torch
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    blob = {"format": FORMAT, "state_dict": {k: v.detach().cpu() for k, v in generator.state_dict().items()},
+            "config": generator.config.to_dict(), "pose_dims": generator.pose_dims, "n_motifs": generator.n_motifs,
+            "skeleton": json.dumps(_skeleton_to_json(skeleton)), "mean": torch.as_tensor(mean),
+            "std": torch.as_tensor(std), "genre": genre, "info": json.dumps(info),
+            "start_poses": torch.as_tensor(start_poses, dtype=torch.float16)}
+    if template is not None:  # the model's motifs travel with it: a rebuilt motif model cannot confuse it
+        blob["template"], blob["transitions"] = torch.as_tensor(template), torch.as_tensor(transitions)
+    with atomic_output(path, "wb") as fh:
+        torch.save(blob, fh)
+    with atomic_output(path.with_suffix(".json"), "w") as fh:
+        json.dump({"genre": genre, **info}, fh, indent=1)
+
+
+def load_model(path: Path) -> StoredModel:
+    """Load a model file; a missing, corrupt or foreign file is a ``ModelError``."""
+    import torch
+
+    from .model import NeuralConfig, PoseGenerator
+
+    path = Path(path)
+    if not path.is_file():
+        raise ModelError(f"neural model {path} does not exist; train one with 'dancesynth train'")
+    try:
+        blob = torch.load(path, map_location="cpu", weights_only=True)
+        if not isinstance(blob, dict) or blob.get("format") != FORMAT:
+            raise ValueError("not a dancesynth neural model of this version")
+        config = NeuralConfig(**blob["config"])
+        gen = PoseGenerator(int(blob["pose_dims"]), int(blob["n_motifs"]), config)
+        gen.load_state_dict(blob["state_dict"])
+        skeleton = _skeleton_from_json(json.loads(blob["skeleton"]))
+        info = json.loads(blob["info"])
+        start = blob["start_poses"].float().numpy()
+        motifs = [blob[k].numpy() if k in blob else None for k in ("template", "transitions")]
+        if (motifs[0] is None) != (gen.n_motifs == 0) or (motifs[0] is not None and motifs[0].shape != (gen.n_motifs,)):
+            raise ValueError("its motif template does not fit the network")
+    except (OSError, RuntimeError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile,
+            json.JSONDecodeError, __import__("pickle").UnpicklingError) as exc:
+        raise ModelError(f"neural model {path} is corrupt or from another version ({str(exc).splitlines()[0]}); "
+                         "retrain it with 'dancesynth train' or reinstall dancesynth") from None
+    gen.eval()
+    return StoredModel(gen, skeleton, blob["mean"].numpy(), blob["std"].numpy(), str(blob["genre"]), info,
+                       start, path, *motifs)

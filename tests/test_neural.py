@@ -1,0 +1,163 @@
+"""The learned pose generator's pieces: pose encoding, torch FK, windowed AdaIN, losses, overfitting."""
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from dancesynth import rotations as rot  # noqa: E402
+from dancesynth.engines.neural.data import (TRAIN_FPS, beat_phase, decode_pose, encode_pose,  # noqa: E402
+                                            hamming_weights, pose_dims)
+from dancesynth.engines.neural.engine import motif_plan  # noqa: E402
+from dancesynth.engines.neural.losses import Body, PoseLoss, fk as torch_fk, geodesic  # noqa: E402
+from dancesynth.engines.neural.model import NeuralConfig, PoseGenerator, WindowedAdaIN  # noqa: E402
+from dancesynth.engines.neural.train import make_batch, training_set  # noqa: E402
+from dancesynth.kinematics import fk  # noqa: E402
+from dancesynth.motion.database import open_database  # noqa: E402
+from dancesynth.motion.resample import resample_clip_arrays  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def style():
+    return open_database().styles["salsa-97-116bpm"]
+
+
+@pytest.fixture(scope="module")
+def clip30(style):
+    c = style.clip(0)
+    return resample_clip_arrays(c.local_rot, c.root_pos, c.contacts, style.fps, TRAIN_FPS)
+
+
+def test_pose_vectors_round_trip_a_real_dance(style, clip30):
+    local, root, contacts = clip30
+    poses = encode_pose(local, root, contacts, TRAIN_FPS)
+    assert poses.shape == (len(local), pose_dims(style.skeleton.n_joints))
+    back_rot, back_root, back_contacts = decode_pose(poses, TRAIN_FPS, yaw0=rot.heading(local[0, 0]),
+                                                     xz0=root[0, [0, 2]])
+    assert np.degrees(rot.angle(back_rot, local)).max() < 0.01
+    assert np.abs(back_root - root).max() < 1e-4        # the trajectory is integrated back to the millimetre
+    assert (back_contacts == contacts).all()
+
+
+def test_torch_fk_equals_numpy_fk(style, clip30):
+    local, root, _ = clip30
+    rng = np.random.default_rng(1)
+    local = rot.mul(local[:40], rot.exp(rng.normal(0, 0.3, (40, local.shape[1], 3))))  # off the mocap manifold too
+    from scipy.spatial.transform import Rotation
+
+    mats = torch.as_tensor(Rotation.from_quat(local.reshape(-1, 4)).as_matrix().reshape(40, -1, 3, 3))
+    sk = style.skeleton
+    g_mats, g_pos = torch_fk(mats, torch.as_tensor(root[:40]), torch.as_tensor(sk.offsets), list(sk.parents))
+    ref_rot, ref_pos = fk(local, root[:40], sk.offsets, sk.parents)
+    assert np.abs(g_pos.numpy() - ref_pos).max() < 1e-9
+    ref_mats = Rotation.from_quat(ref_rot.reshape(-1, 4)).as_matrix().reshape(g_mats.shape)
+    assert np.abs(g_mats.numpy() - ref_mats).max() < 1e-9
+
+
+def test_world_positions_integrate_the_trajectory_like_decode(style, clip30):
+    local, root, contacts = clip30
+    poses = encode_pose(local[:90], root[:90], contacts[:90], TRAIN_FPS).astype(np.float64)
+    body = Body(style.skeleton, TRAIN_FPS)
+    body.offsets = body.offsets.double()
+    mats, r, _ = body.split(torch.as_tensor(poses))
+    _, pos = body.world_positions(mats, r)
+    q, rp, _ = decode_pose(poses, TRAIN_FPS)
+    _, ref = fk(q, rp, style.skeleton.offsets, style.skeleton.parents)
+    assert np.abs(pos.numpy() - ref).max() < 1e-6
+
+
+def test_geodesic_loss_is_the_rotation_angle():
+    from scipy.spatial.transform import Rotation
+
+    a = Rotation.from_rotvec([[0, 0.3, 0], [0.2, 0, 0]])
+    b = Rotation.from_rotvec([[0, 0.8, 0], [0.2, 0, 0]])
+    ang = geodesic(torch.as_tensor(a.as_matrix()), torch.as_tensor(b.as_matrix())).numpy()
+    assert ang == pytest.approx([0.5, 0.0], abs=2e-3)
+
+
+def test_adain_leaves_word_boundaries_unchanged():
+    torch.manual_seed(0)
+    layer = WindowedAdaIN(16, 8)
+    torch.nn.init.normal_(layer.mlp[-1].weight)        # a trained-looking layer, not the identity start
+    beats = np.array([0.0, 13.0, 27.0, 40.0])            # three words of uneven length
+    _, phase, _ = beat_phase(41, beats, TRAIN_FPS)
+    w = torch.as_tensor(hamming_weights(phase))
+    h = torch.randn(41, 16)
+    music = torch.randn(41, 3)
+    out = layer(h, music, w)
+    bounds = [0, 13, 27]
+    assert torch.equal(out[bounds], h[bounds])
+    middle = [6, 20, 33]
+    assert (out[middle] - h[middle]).abs().mean() > 0.1   # the music does restyle the word's middle
+    assert w.max() == pytest.approx(1.0, abs=0.01) and w.min() >= 0
+
+
+def test_tiny_model_overfits_a_short_clip(style):
+    """acLSTM with half its inputs self-fed learns one 1-second clip: the loss falls at least 10x."""
+    ts = training_set(style.name, motifs=False)
+    cfg = NeuralConfig.named("tiny")
+    torch.manual_seed(0)
+    gen = PoseGenerator(pose_dims(ts.skeleton.n_joints), 0, cfg)
+    loss_fn = PoseLoss(Body(ts.skeleton, TRAIN_FPS), ts.mean, ts.std, cfg)
+    batch = make_batch(ts, ts.train, [(0, ts.train[0].first + 5)], 30)
+    opt = torch.optim.Adam(gen.parameters(), lr=1e-2)
+    losses = []
+    for _ in range(60):
+        out = gen(batch["first"], batch["cond"], batch["music"], batch["window"], target=batch["target"])
+        total, _ = loss_fn(out, batch["target"])
+        opt.zero_grad()
+        total.backward()
+        opt.step()
+        losses.append(total.item())
+    assert losses[-1] < losses[0] / 10
+
+
+def test_motif_plan_follows_the_genre_template():
+    """Eq. (5): the signature of a long plan approaches the template even with a biased transition matrix."""
+    template = np.array([0.5, 0.3, 0.2])
+    trans = np.array([[0.9, 0.05, 0.05], [0.1, 0.8, 0.1], [0.1, 0.1, 0.8]])
+    plan = motif_plan(400, template, trans, np.random.default_rng(3))
+    sig = np.bincount(plan, minlength=3) / 400
+    assert np.abs(sig - template).max() < 0.02
+    assert (plan == motif_plan(400, template, trans, np.random.default_rng(3))).all()
+    assert (motif_plan(5, None, None, np.random.default_rng(3)) == -1).all()   # a model without motifs
+
+
+def test_torch_word_features_match_motion_words(style, clip30):
+    """The perceptual loss sees the same word features as the motif model (motion/words.py)."""
+    from dancesynth.engines.neural.losses import Perceptual
+    from dancesynth.motion import words
+    from dancesynth.types import MotionClip
+
+    local, root, contacts = clip30
+    clip = MotionClip(style.skeleton, TRAIN_FPS, root[:200], local[:200])
+    beats = np.array([3, 17, 30, 46, 61, 75])
+    ref = words.clip_words(clip, beats).features
+    poses = encode_pose(local[:200], root[:200], contacts[:200], TRAIN_FPS).astype(np.float64)
+    body = Body(style.skeleton, TRAIN_FPS)
+    body.offsets = body.offsets.double()
+    percept = Perceptual(body, words.landmark_indices(style.skeleton), torch.nn.Identity())
+    cut = torch.as_tensor([[0, a, b] for a, b in zip(beats[:-1], beats[1:])], dtype=torch.float64)
+    ours = percept.features(torch.as_tensor(poses)[None], cut).numpy()
+    assert ours.shape == ref.shape
+    assert np.abs(ours - ref).max() < 1e-3        # float32 reference; velocities are in m/s
+
+
+def test_beat_warp_moves_generated_beats_onto_music_beats():
+    from dancesynth.engines.neural.engine import _warp_positions, beat_warp
+
+    music = np.arange(0.0, 10.0, 0.5)
+    rng = np.random.default_rng(0)
+    motion = music + rng.uniform(-0.08, 0.08, len(music))
+    motion = np.delete(motion, 7)                   # one beat the generator skipped
+    motion = np.r_[motion, 6.27]                    # and an accent off the beat
+    motion.sort()
+    am, ag = beat_warp(motion, music)
+    assert 7 * 0.5 not in am                        # the skipped beat has no partner ...
+    assert len(am) >= len(music) - 3
+    src = _warp_positions(am, (am, ag))
+    assert np.allclose(src, ag)                     # ... the others are shown exactly at their music beat
+    rates = np.diff(ag) / np.diff(am)
+    assert rates.min() >= 0.67 and rates.max() <= 1.5
+    t = np.linspace(-1, 12, 500)
+    assert np.all(np.diff(_warp_positions(t, (am, ag))) > 0)   # time never runs backwards

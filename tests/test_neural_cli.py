@@ -1,0 +1,110 @@
+"""`dancesynth train` and `dance --engine neural` end to end, with the shipped weights."""
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from dancesynth.api import dance  # noqa: E402
+from dancesynth.cli import main  # noqa: E402
+from dancesynth.engines.neural.store import SHIPPED, find_model, load_model  # noqa: E402
+from dancesynth.errors import InputError, ModelError  # noqa: E402
+from dancesynth.kinematics import clip_fk  # noqa: E402
+from dancesynth.motion.roles import find_roles  # noqa: E402
+from dancesynth.music import analyze_music  # noqa: E402
+
+SONG = "src/dancesynth/data/music/Kevin_MacLeod_-_Vibe_Ace.ogg"
+
+
+@pytest.fixture(autouse=True)
+def own_cache(tmp_path, monkeypatch):
+    """Models a user trained must not leak into these tests (nor theirs into the user's cache)."""
+    monkeypatch.setenv("DANCESYNTH_CACHE", str(tmp_path / "cache"))
+
+
+@pytest.fixture(scope="module")
+def music():
+    return analyze_music(path=SONG)
+
+
+def test_neural_dance_with_the_shipped_model(music):
+    assert find_model("salsa").parent == SHIPPED
+    clip = dance(music, engine="neural", style="salsa", seed=2)
+    s = clip.meta["summary"]
+    assert clip.n_frames == pytest.approx(music.duration_s * 30, abs=1.5)
+    assert np.isfinite(clip.local_rot).all() and np.isfinite(clip.root_pos).all()
+    assert s["realtime_factor"] >= 5
+    roles = find_roles(clip.skeleton)
+    _, pos = clip_fk(clip)
+    lowest = pos[:, list(roles.ankles), 1].min(axis=1)      # the lower ankle of each frame
+    assert np.percentile(lowest, 5) > -0.05 and np.median(lowest) < 0.2   # on the floor, not under or floating
+    moved = np.linalg.norm(np.diff(pos[:, roles.wrists[0]], axis=0), axis=-1).sum()
+    assert moved > 10.0                                       # it dances: the hand travels metres, not a statue
+    other = dance(music, engine="neural", style="salsa", seed=3)
+    assert not np.allclose(other.local_rot, clip.local_rot)   # another seed, another dance
+
+
+def test_dance_cli_neural_writes_a_bvh(tmp_path, capsys):
+    out = tmp_path / "n.bvh"
+    assert main(["dance", SONG, "--engine", "neural", "-o", str(out)]) == 0
+    assert out.read_text().startswith("HIERARCHY")
+    assert "neural" in capsys.readouterr().out
+
+
+def test_genre_without_a_model_is_a_clear_error(music):
+    with pytest.raises(ModelError, match="dancesynth train --style jpop"):
+        dance(music, engine="neural", style="jpop")
+
+
+def test_missing_and_corrupt_weights(tmp_path):
+    with pytest.raises(ModelError, match="does not exist"):
+        load_model(tmp_path / "nothing.pt")
+    junk = tmp_path / "junk.pt"
+    junk.write_bytes(b"not a model at all")
+    with pytest.raises(ModelError, match="corrupt"):
+        load_model(junk)
+    cut = tmp_path / "cut.pt"
+    cut.write_bytes(find_model("salsa").read_bytes()[:100_000])
+    with pytest.raises(ModelError, match="corrupt"):
+        load_model(cut)
+
+
+def test_corrupt_user_model_fails_the_dance_cleanly(tmp_path, music, capsys):
+    user = tmp_path / "cache" / "models" / "neural"
+    user.mkdir(parents=True)
+    (user / "salsa.pt").write_bytes(b"\0" * 64)
+    assert main(["dance", SONG, "--engine", "neural", "-o", str(tmp_path / "x.bvh")]) == 1
+    err = capsys.readouterr().err
+    assert "corrupt" in err and "Traceback" not in err
+    assert not (tmp_path / "x.bvh").exists()
+
+
+def test_train_cli_tiny_writes_a_loadable_model(tmp_path, capsys):
+    out = tmp_path / "models"
+    assert main(["train", "--config", "tiny", "--minutes", "0.2", "--out", str(out), "-q"]) == 0
+    text = capsys.readouterr().out
+    assert "wrote" in text and "loss" in text
+    model = load_model(out / "salsa.pt")
+    assert model.genre == "salsa" and model.info["steps"] > 0
+    assert model.info["final_loss"] < model.info["first_loss"]
+    assert (out / "salsa.json").is_file()
+    assert not list(out.glob("*.part"))
+
+
+def test_train_bad_input(tmp_path, capsys):
+    assert main(["train", "--style", "tango", "--config", "tiny", "--out", str(tmp_path)]) == 2
+    assert "unknown style 'tango'" in capsys.readouterr().err
+    assert main(["train", "--minutes", "-1", "--out", str(tmp_path)]) == 2
+    if not torch.cuda.is_available():
+        assert main(["train", "--device", "cuda", "--config", "tiny", "--out", str(tmp_path)]) == 2
+        assert "no CUDA GPU" in capsys.readouterr().err
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert main(["train", "--config", "tiny", "--out", str(blocker / "models")]) == 2
+    assert "cannot write the model" in capsys.readouterr().err
+    blocker.unlink()
+    with pytest.raises(InputError):
+        from dancesynth.engines.neural.train import train
+
+        train("salsa", "huge")
+    assert not list(tmp_path.iterdir())
