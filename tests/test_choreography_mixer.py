@@ -56,10 +56,10 @@ def test_the_dance_follows_the_genre_signature(danced, model, bundled_db):
     ids = danced.meta["motif_ids"]
     assert len(ids) == len(danced.meta["grid_times_s"]) - 1
     np.testing.assert_array_equal(ids, danced.meta["motif_plan"])   # the style has words of every planned motif
-    assert chi2(model.templates["salsa"], model.signature(ids)) < 0.05   # measured 0.005
-    # The motion itself, cut at its beats, mostly dances the planned motifs (measured 0.61).
+    assert chi2(model.templates["salsa"], model.signature(ids)) < 0.05   # measured 0.007
+    # The motion itself, cut at its beats, mostly dances the planned motifs (measured 0.84).
     found = _output_motifs(danced, model)
-    assert np.mean(found == ids[:len(found)]) > 0.5
+    assert np.mean(found == ids[:len(found)]) > 0.7
 
 
 def test_words_are_real_words_with_their_beats_on_music_beats(danced, bundled_db):
@@ -81,10 +81,10 @@ def test_motion_beats_hit_music_beats_and_stitches_are_smooth(danced, music, moc
     assert len(jumps) > 20   # words are re-placed often: smoothness is really tested
     scores = evaluate(danced, music_beats_s=music.beat_times_s, transitions_s=jumps,
                       warp_rates=danced.meta["warp_rates"], mocap=mocap_reference(mocap, danced.fps))
-    assert scores["hit_rate"] > 0.45                          # measured 0.55 (streaming engine: 0.35)
-    assert scores["jump_p99_vs_mocap"] < 1.0                  # measured 0.51
+    assert scores["hit_rate"] > 0.45                          # measured 0.51 (streaming engine: 0.35)
+    assert scores["jump_p99_vs_mocap"] < 1.0                  # measured 0.64
     assert scores["transition_frac_over_mocap_p99"] <= 0.02  # measured 0.0
-    assert scores["transition_jump_vs_mocap_p99"] < 1.2       # measured 0.72
+    assert scores["transition_jump_vs_mocap_p99"] < 1.2       # measured 0.90
 
 
 def test_planted_feet_are_held(danced, music, bundled_db, model, mocap):
@@ -145,9 +145,9 @@ def test_recreate_a_held_out_dance(music, bundled_db, model, tmp_path):
     wanted = np.resize(model.assign(clip_words(read_bvh(ref)).features), len(clip.meta["motif_ids"]))
     # Danced: the word of every beat is one of the reference's motif there (≥ 80 % required).
     assert np.mean(clip.meta["motif_ids"] == wanted) >= 0.8
-    # Found again in the stitched motion (blends and foot IK move word starts): measured 0.56.
+    # Found again in the stitched motion (blends and foot IK move word starts): measured 0.87.
     found = _output_motifs(clip, model)
-    assert np.mean(found == wanted[:len(found)]) > 0.45
+    assert np.mean(found == wanted[:len(found)]) > 0.75
     assert clip.meta["summary"]["recreate"] == str(ref)
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from dancesynth.engines.graph.meta_graph import (GraphConfig, MetaMotionGraph, build_graph, derive_steps,
-                                                 synchronization_capacity)
+                                                 synchronization_capacity, trap_nodes)
 from dancesynth.engines.graph.search import Path, path_cost, search
 from dancesynth.errors import SynthesisError
 
@@ -61,6 +61,43 @@ def test_capacity_of_a_loop_through_a_jump_is_infinite():
     # Clip 0..3; jump from the end (3) back to 0 closes a loop.
     g = tiny_graph([4], [(3, 0, 1.0)], [0, 0, 0, 0])
     assert np.isinf(g.capacity).all()
+
+
+@pytest.mark.parametrize("n, edges, trapped", [
+    (6, [(0, 1), (1, 2), (2, 0), (2, 3), (3, 4), (4, 3)], [3, 4]),    # a 2-beat loop with no way back
+    (6, [(0, 1), (1, 2), (2, 0), (2, 3), (3, 4), (4, 3), (4, 0)], []),  # ... with a way back: not a trap
+    (5, [(0, 1), (1, 2), (2, 0), (2, 3), (3, 3), (1, 4)], [3]),       # a self-loop off the main cycle
+    (3, [(0, 1), (1, 2)], []),                                        # no cycle at all
+])
+def test_trap_cycles_are_the_loops_that_never_lead_back(n, edges, trapped):
+    src, dst = np.array(edges).T
+    assert np.flatnonzero(trap_nodes(n, src, dst)).tolist() == trapped
+
+
+def test_a_search_never_enters_a_trap_cycle():
+    # Clip 0..5 loops (5 ~ 0); beat 2 jumps to clip 6..7, whose end jumps back to its start: the
+    # step 7 -> (6) -> 7 is a one-beat trap. Its low intensity matches the music (0) better than the
+    # main loop's (1), so an unpruned search dives in and stays.
+    bi = [(5, 0, 1.0), (2, 6, 1.0), (7, 6, 1.0)]
+    w1 = [1, 1, 1, 1, 1, 1, 0, 0]
+    free = tiny_graph([6, 2], bi, w1)
+    free_path = search(free, np.zeros(12), np.full(12, 0.5), start_nodes=np.array([0]), thc=INF)
+    assert set(free_path.nodes[-4:].tolist()) <= {6, 7}
+    g = tiny_graph([6, 2], bi, w1)
+    derive_steps(g, prune_traps=True)
+    assert g.n_trapped == 1 and np.isinf(g.capacity[:6]).all()
+    path = search(g, np.zeros(12), np.full(12, 0.5), start_nodes=np.array([0]), thc=INF)
+    assert not set(path.nodes.tolist()) & {6, 7}
+
+
+def test_bundled_graphs_have_no_trap_left(bundled_db):
+    trapped = {}
+    for style in bundled_db.styles.values():
+        g = build_graph(style)
+        assert not trap_nodes(g.n_nodes, g.step_src, g.step_dst).any(), style.name
+        trapped[style.name] = g.n_trapped
+        assert build_graph(style, GraphConfig.paper()).n_trapped == 0     # the paper's graph keeps them
+    assert trapped["salsa-120-150bpm"] == 4 and sum(trapped.values()) == 18
 
 
 # --- the DP against brute force ----------------------------------------------------------------

@@ -40,6 +40,10 @@ def test_neural_dance_with_the_shipped_model(music):
     assert np.percentile(lowest, 5) > -0.05 and np.median(lowest) < 0.2   # on the floor, not under or floating
     moved = np.linalg.norm(np.diff(pos[:, roles.wrists[0]], axis=0), axis=-1).sum()
     assert moved > 10.0                                       # it dances: the hand travels metres, not a statue
+    # The beat warp never freezes the dancer: not at the start, the end or anywhere between.
+    assert clip.meta["warp_rates"].min() > 0.2
+    assert np.all(np.linalg.norm(np.diff(pos[:, 0], axis=0), axis=-1)[:5] > 0) and \
+        np.all(np.abs(np.diff(clip.local_rot[-5:], axis=0)).max(axis=(1, 2)) > 0)
     other = dance(music, engine="neural", style="salsa", seed=3)
     assert not np.allclose(other.local_rot, clip.local_rot)   # another seed, another dance
 

@@ -121,8 +121,12 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
     click.echo(f"song      {song}  {s['duration_s']:.1f} s")
     click.echo(f"tempo     {s['tempo_bpm']:.1f} bpm, {s['beats']} beats{note}")
     click.echo(f"style     {s['style']}" + (" (dancing double time)" if s["subdivide"] > 1 else ""))
-    click.echo(f"engine    {s['engine']}: {s['segments']} segment(s) of {s['segment_s']:g} s, "
-               f"{s['transitions']} transitions, median {s['step_s_median'] * 1e3:.1f} ms per segment")
+    if s["engine"] == "streaming":
+        click.echo(f"engine    streaming: {s['segments']} segment(s) of {s['segment_s']:g} s, "
+                   f"{s['transitions']} transitions, median {s['step_s_median'] * 1e3:.1f} ms per segment")
+    else:  # the other engines see the whole song at once
+        click.echo(f"engine    {s['engine']}: the whole song at once, {s['transitions']} transitions, "
+                   f"{s['step_s_median'] * 1e3:.1f} ms")
     if s.get("motif_chi2") is not None:
         click.echo(f"motifs    chi2 to the {s['genre']} template {s['motif_chi2']:.3f}"
                    + (f", {s['constraints']} constraint(s)" if s.get("constraints") else "")

@@ -68,12 +68,18 @@ def beat_warp(motion_beats_s: np.ndarray, music_beats_s: np.ndarray, *, reach: f
 
 
 def _warp_positions(t_out: np.ndarray, anchors) -> np.ndarray:
-    """Motion times for output times: the anchors' piecewise-linear map, shifted beyond its ends."""
+    """Motion times for output times: the anchors' piecewise-linear map, shifted beyond its ends.
+
+    Before the first anchor the map is shifted, unless that would ask for motion before
+    the first generated frame: then it runs from (0, 0) to the anchor, so the dance never
+    freezes on its first pose (the generated motion starts at 0 s).
+    """
     am, ag = anchors
     if len(am) == 0:
         return t_out.copy()
     src = np.interp(t_out, am, ag)
-    src = np.where(t_out < am[0], t_out + (ag[0] - am[0]), src)
+    head = t_out + (ag[0] - am[0]) if ag[0] >= am[0] or ag[0] <= 0 else t_out * (ag[0] / am[0])
+    src = np.where(t_out < am[0], head, src)
     return np.where(t_out > am[-1], t_out + (ag[-1] - am[-1]), src)
 
 
@@ -83,7 +89,7 @@ def generate(model: StoredModel, music: MusicFeatures, grid, motifs: np.ndarray,
     import torch
 
     gen = model.generator
-    n = int(np.floor(music.duration_s * TRAIN_FPS)) + int(TRAIN_FPS)   # a second to spare for the warp
+    n = int(np.floor(music.duration_s * TRAIN_FPS)) + int(2 * TRAIN_FPS)   # two seconds to spare for the warp
     k, phase, length_s = beat_phase(n, grid.times_s * TRAIN_FPS, TRAIN_FPS)
     eye = np.eye(max(gen.n_motifs, 1), dtype=np.float32)[:, :gen.n_motifs]
     motif = eye[np.maximum(motifs[k], 0)] * (motifs[k] >= 0)[:, None]
@@ -112,7 +118,10 @@ def generate(model: StoredModel, music: MusicFeatures, grid, motifs: np.ndarray,
         _, pos = fk(w_local, w_root, sk.offsets, sk.parents)
         beats_s = kinematic_beats(summed_speed(pos, fps), fps)[0] / fps
         anchors = beat_warp(beats_s, grid.times_s)   # the grid beats the generator was told (phase 0)
-        src_s = np.interp(_warp_positions(t_out, anchors), t_out, src_s)
+        x = _warp_positions(t_out, anchors)
+        # The previous pass's map, at slope 1 beyond its ends (np.interp alone would freeze them).
+        src_s = np.where(x > t_out[-1], src_s[-1] + (x - t_out[-1]),
+                         np.where(x < 0, src_s[0] + x, np.interp(x, t_out, src_s)))
     src_s = np.clip(src_s, 0.0, (n - 1) / TRAIN_FPS)
     local, root, _ = sample_frames(local, root, src_s * TRAIN_FPS, contacts)
     # The feet the generated motion itself plants (low and slow), found as in the database's
