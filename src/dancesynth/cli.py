@@ -131,8 +131,11 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
         click.echo(f"motifs    chi2 to the {s['genre']} template {s['motif_chi2']:.3f}"
                    + (f", {s['constraints']} constraint(s)" if s.get("constraints") else "")
                    + (f", re-creating {s['recreate']}" if s.get("recreate") else ""))
-    click.echo(f"time      music {tm['music_s']:.2f} s, database {tm['database_s']:.2f} s, graph "
-               f"{tm['graph_s']:.2f} s{' (cached)' if s['graph_cached'] else ''}, synthesis "
+    # The choreography and neural engines spend the graph's stage on motifs and on loading the model.
+    stage = {"choreography": "motifs", "neural": "model"}.get(s["engine"], "graph")
+    cached = " (cached)" if stage == "graph" and s["graph_cached"] else ""
+    click.echo(f"time      music {tm['music_s']:.2f} s, database {tm['database_s']:.2f} s, {stage} "
+               f"{tm['graph_s']:.2f} s{cached}, synthesis "
                f"{tm['synthesis_s']:.2f} s, write {tm['write_s']:.2f} s; total {time.perf_counter() - t0:.2f} s")
     click.echo(f"wrote     {output} ({s['frames']} frames at {s['fps']:g} fps)")
 
