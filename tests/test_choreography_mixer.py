@@ -13,6 +13,7 @@ from dancesynth.engines.choreography.mixer import MixerConfig
 from dancesynth.errors import InputError
 from dancesynth.eval import motion_metrics as mm
 from dancesynth.eval.bench_quality import at_fps
+from dancesynth.eval.bench_structure import found_motifs
 from dancesynth.eval.evaluate import evaluate, mocap_reference
 from dancesynth.io.bvh import read_bvh, write_bvh
 from dancesynth.motion.database import MotionDatabase
@@ -44,12 +45,6 @@ def mocap(bundled_db):
     return [at_fps(st.clip(i), 30.0) for i in range(st.n_clips)]
 
 
-def _output_motifs(clip, model):
-    """The motif of each beat interval of a dance, found again from its motion (cut at its beat grid)."""
-    frames = np.unique(np.clip(np.rint(clip.meta["grid_times_s"] * clip.fps).astype(int), 0, clip.n_frames - 1))
-    return model.assign(clip_words(clip, beat_frames=frames).features)
-
-
 def test_the_dance_follows_the_genre_signature(danced, model, bundled_db):
     s = danced.meta["summary"]
     assert danced.meta["style"] == STYLE and s["engine"] == "choreography"
@@ -58,7 +53,7 @@ def test_the_dance_follows_the_genre_signature(danced, model, bundled_db):
     np.testing.assert_array_equal(ids, danced.meta["motif_plan"])   # the style has words of every planned motif
     assert chi2(model.templates["salsa"], model.signature(ids)) < 0.05   # measured 0.007
     # The motion itself, cut at its beats, mostly dances the planned motifs (measured 0.84).
-    found = _output_motifs(danced, model)
+    found = found_motifs(danced, model, danced.meta["grid_times_s"])
     assert np.mean(found == ids[:len(found)]) > 0.7
 
 
@@ -146,7 +141,7 @@ def test_recreate_a_held_out_dance(music, bundled_db, model, tmp_path):
     # Danced: the word of every beat is one of the reference's motif there (≥ 80 % required).
     assert np.mean(clip.meta["motif_ids"] == wanted) >= 0.8
     # Found again in the stitched motion (blends and foot IK move word starts): measured 0.87.
-    found = _output_motifs(clip, model)
+    found = found_motifs(clip, model, clip.meta["grid_times_s"])
     assert np.mean(found == wanted[:len(found)]) > 0.75
     assert clip.meta["summary"]["recreate"] == str(ref)
 

@@ -145,10 +145,9 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
     grid = beat_grid(music, subdivide=subdivide)
     signature = None
     if config.follow_signature:
-        from .engines.graph.signature import signature_target
-        from .motion.motifs import load_motif_model
+        from .engines.graph.signature import database_signature
 
-        signature = signature_target(style, graph, load_motif_model(db), config.render.signature_weight)
+        signature = database_signature(style, graph, db, config.render.signature_weight)
     engine = GraphEngine(style, graph, config.render, fps=config.fps, signature=signature)
     segments, stats = synthesise(engine, grid, music.duration_s, config, progress)
     timings["synthesis_s"] = time.perf_counter() - t

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import click
 
+from .cli_live import render, serve, stream
+from .cli_support import Progress, bvh_output, writable, write_json
 from .errors import DanceSynthError, InputError
 
 
@@ -18,30 +20,6 @@ def _setup_env() -> None:
     from .motion.database import cache_dir
 
     os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_dir() / "numba"))
-
-
-class _Progress:
-    """A tqdm bar per stage on stderr (quiet when asked or when stderr is not a terminal)."""
-
-    def __init__(self, enabled: bool):
-        self.enabled = enabled
-        self.bars = {}
-
-    def __call__(self, stage: str, done: int, total: int):
-        if not self.enabled:
-            return
-        from tqdm import tqdm
-
-        bar = self.bars.get(stage)
-        if bar is None:
-            bar = self.bars[stage] = tqdm(total=total, desc=stage, unit="seg", leave=False, file=sys.stderr)
-        bar.update(done - bar.n)
-        if done >= total:
-            bar.close()
-
-    def close(self):
-        for bar in self.bars.values():
-            bar.close()
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -84,8 +62,7 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
     from .io.bvh import write_bvh
 
     output = output or Path(song.stem + ".bvh")
-    if output.suffix.lower() != ".bvh":
-        raise InputError(f"output {output} must end in .bvh")
+    bvh_output(output)
     config = DanceConfig(style=style, engine=engine, segment_s=segment_seconds, fps=fps, seed=seed,
                          max_duration_s=max_minutes * 60.0, motif_at=motif_at, recreate=recreate,
                          follow_signature=follow_signature)
@@ -100,7 +77,7 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
         except ValueError as exc:
             raise InputError(f"{exc}: check --ths and --thr") from None
         config = replace(config, graph=graph)
-    progress = _Progress(enabled=not quiet and sys.stderr.isatty())
+    progress = Progress(enabled=not quiet and sys.stderr.isatty())
     t0 = time.perf_counter()
     try:
         clip = make_dance(song, config=config, database=database, progress=progress)
@@ -111,7 +88,7 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
     if report_path is not None:
         from .eval.report import dance_report
 
-        _write_json(report_path, dance_report(clip))
+        write_json(report_path, dance_report(clip))
     s = clip.meta["summary"]
     s["timings_s"]["write_s"] = time.perf_counter() - t
     if quiet:
@@ -180,16 +157,6 @@ def build_db(source, output, beats, snap, manifest):
     click.echo(f"wrote {output}: {len(db.styles)} styles from {len(sources)} files")
 
 
-def _write_json(path: Path, data) -> None:
-    import json
-
-    from .io.files import atomic_output
-
-    with atomic_output(path) as fh:
-        json.dump(data, fh, indent=1, allow_nan=False)
-        fh.write("\n")
-
-
 @cli.command()
 @click.argument("dance_path", metavar="DANCE.bvh", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--genre", help="Compare with this genre's template (default: the nearest template).")
@@ -204,9 +171,7 @@ def motifs(dance_path, genre, json_path, plot_path, database):
     from .io.bvh import read_bvh
     from .motion.motifs import dance_motifs, load_motif_model
 
-    for out in (json_path, plot_path):
-        if out is not None and not out.parent.is_dir():
-            raise InputError(f"cannot write {out}: folder {out.parent} does not exist")
+    writable(json_path, plot_path)
     if database is not None:
         from .motion.database import open_database
 
@@ -222,7 +187,7 @@ def motifs(dance_path, genre, json_path, plot_path, database):
     click.echo(f"chi2 to the {result['genre']} template: {result['chi2']:.3f} "
                f"(others: {', '.join(f'{g} {v:.3f}' for g, v in result['chi2_by_genre'].items() if g != result['genre'])})")
     if json_path is not None:
-        _write_json(json_path, {"file": str(dance_path), **result})
+        write_json(json_path, {"file": str(dance_path), **result})
         click.echo(f"wrote  {json_path}")
     if plot_path is not None:
         from .motion.motif_plot import plot_motifs
@@ -249,7 +214,7 @@ def beats(song, json_path, tracker):
             "default_tempo": bool(music.default_tempo), "tracker": tracker,
             "intensity_db": [round(float(v), 2) for v in music.intensity_db]}
     if json_path is not None:
-        _write_json(json_path, data)
+        write_json(json_path, data)
     note = " (no clear beat: a steady default tempo)" if music.default_tempo else ""
     click.echo(f"{song}: {music.duration_s:.1f} s, {music.tempo_bpm:.1f} bpm, {len(music.beat_times_s)} beats, "
                f"confidence {music.beat_confidence:.2f}{note}")
@@ -274,9 +239,7 @@ def eval_(dance_path, song, json_path, plot_path, reference_path, style, report_
     from .eval.evaluate import format_table
     from .eval.report import beat_plot_data, evaluate_files, plot_beats
 
-    for out in (json_path, plot_path):
-        if out is not None and not out.parent.is_dir():
-            raise InputError(f"cannot write {out}: folder {out.parent} does not exist")
+    writable(json_path, plot_path)
     result = evaluate_files(dance_path, song, reference_path=reference_path, report_path=report_path,
                             style=style, database=database)
     columns = {"dance": result["dance"]}
@@ -287,7 +250,7 @@ def eval_(dance_path, song, json_path, plot_path, reference_path, style, report_
     click.echo(f"mocap  {result['mocap_style'] or 'none with this skeleton (use --style)'}")
     click.echo(format_table(columns))
     if json_path is not None:
-        _write_json(json_path, result)
+        write_json(json_path, result)
     if plot_path is not None:
         from .io.bvh import read_bvh
         from .music import analyze_music
@@ -359,94 +322,6 @@ def train(style, config_name, device, minutes, out_dir, seed, database, quiet):
 
 
 @cli.command()
-@click.argument("source")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=Path("live.bvh"),
-              show_default=True, help="BVH file that grows as the dance goes (a valid BVH after every segment).")
-@click.option("--segment-seconds", type=float, default=5.0, show_default=True, help="Length of a segment.")
-@click.option("--style", help="Style or genre to dance (default: chosen from the first segment's tempo).")
-@click.option("--fps", type=float, default=30.0, show_default=True, help="Frame rate of the output.")
-@click.option("--seed", type=int, default=None, help="Vary the dance between runs.")
-@click.option("--database", type=click.Path(file_okay=False, path_type=Path),
-              help="A database folder or a folder of BVH files (default: the bundled database).")
-@click.option("--follow-signature", is_flag=True, help="Also keep the genre's motif signature as the dance goes.")
-@click.option("--fast", is_flag=True, help="Read a file as fast as it decodes instead of at real-time pace.")
-@click.option("-q", "--quiet", is_flag=True, help="Only the summary, no line per segment.")
-def stream(source, output, segment_seconds, style, fps, seed, database, follow_signature, fast, quiet):
-    """Dance to SOURCE as it arrives: an audio file (played at real-time pace), '-' for standard input,
-    or an http(s) URL of an audio stream. Motion is synthesised segment by segment (Xu et al.'s double
-    buffer) and appended to the BVH as it goes."""
-    from .io.bvh_writer import BVHStreamWriter
-    from .live.runtime import LiveConfig, run_live
-    from .live.sources import AudioSource
-
-    if output.suffix.lower() != ".bvh":
-        raise InputError(f"output {output} must end in .bvh")
-
-    def report(r):
-        if not quiet:
-            click.echo(f"segment {r.index + 1:3d}  heard {r.audio_end_s:7.2f} s  {r.beats:3d} beats  motion "
-                       f"{r.motion_start_s:6.2f}-{r.motion_end_s:6.2f} s  step {r.process_s * 1e3:6.1f} ms "
-                       f"({100 * r.process_s / r.segment_s:4.1f}% of {r.segment_s:g} s)"
-                       f"{'  LATE' if r.late else ''}  ready at {r.ready_s:6.2f} s")
-
-    config = LiveConfig(segment_s=segment_seconds, style=style, fps=fps, seed=seed, database=database,
-                        follow_signature=follow_signature)
-    with AudioSource(source, realtime=not fast) as src, BVHStreamWriter(output) as writer:
-        summary = run_live(src, writer.append, config=config, on_report=report, realtime=not fast)
-    if summary["frames"] == 0:
-        raise InputError(f"{source}: the stream ended before a single segment could be danced")
-    click.echo(f"style     {summary['style']}, {summary['tempo_bpm']:.1f} bpm")
-    click.echo(f"segments  {summary['segments']} of {segment_seconds:g} s, step median "
-               f"{summary['step_s_median'] * 1e3:.1f} ms, max {summary['step_s_max'] * 1e3:.1f} ms, "
-               f"{summary['late_segments']} late")
-    click.echo(f"latency   first motion ready {summary['first_motion_ready_s']:.2f} s after start "
-               f"({summary['first_audio_s']:.2f} s of audio heard)"
-               + (f"; {summary['silence_s']:.1f} s of stalls bridged" if summary["silence_s"] > 0 else ""))
-    if summary["motif_chi2"] is not None:
-        click.echo(f"motifs    chi2 to the genre template {summary['motif_chi2']:.3f}")
-    click.echo(f"wrote     {output} ({summary['frames']} frames at {fps:g} fps)")
-
-
-@cli.command()
-@click.argument("dance_path", metavar="DANCE.bvh", type=click.Path(dir_okay=False, path_type=Path))
-@click.argument("song", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
-              help="MP4 to write (default: the dance's name with .mp4, here).")
-@click.option("--width", type=int, default=960, show_default=True)
-@click.option("--height", type=int, default=540, show_default=True)
-@click.option("--fps", type=float, default=None, help="Video frame rate (default: the dance's).")
-@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
-def render(dance_path, song, output, width, height, fps, quiet):
-    """Render DANCE.bvh as an MP4 video (H.264) with SONG muxed in sync (AAC)."""
-    from .export.video import render_video_files
-
-    output = output or Path(dance_path.stem + ".mp4")
-    progress = _Progress(enabled=not quiet and sys.stderr.isatty())
-    try:
-        info = render_video_files(dance_path, song, output, width=width, height=height, fps=fps,
-                                  progress=lambda done, total: progress("render", done, total))
-    finally:
-        progress.close()
-    click.echo(f"wrote {output}: {info['frames']} frames at {info['fps']:g} fps, {info['duration_s']:.1f} s, "
-               f"rendered in {info['seconds']:.1f} s")
-
-
-@cli.command()
-@click.option("--host", default="127.0.0.1", show_default=True,
-              help="Address to listen on (127.0.0.1: this machine only; 0.0.0.0: every network).")
-@click.option("--port", type=click.IntRange(1, 65535), default=8000, show_default=True, help="Port to listen on.")
-@click.option("--database", type=click.Path(file_okay=False, path_type=Path),
-              help="A database folder or a folder of BVH files (default: the bundled database).")
-@click.option("--max-upload-mb", type=click.FloatRange(min=0.1), default=50.0, show_default=True,
-              help="Refuse uploaded songs larger than this.")
-def serve(host, port, database, max_upload_mb):
-    """A web page to watch the character dance: open http://HOST:PORT/ in a browser."""
-    from .web.server import serve as run_server
-
-    run_server(host=host, port=port, database=database, max_upload_mb=max_upload_mb)
-
-
-@cli.command()
 @click.argument("song", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), help="BVH to write (default: SONG.bvh).")
 @click.option("--melody-track", type=int, help="MIDI part that carries the melody (see --list-tracks).")
@@ -468,12 +343,15 @@ def conduct(song, output, melody_track, rhythm_track, style, config_path, params
     if list_tracks:
         return click.echo("\n".join(parts_lines(song)))
     output = output or Path(song.stem + ".bvh")
-    if output.suffix.lower() != ".bvh":
-        raise InputError(f"output {output} must end in .bvh")
+    bvh_output(output)
     cfg = make_config(style=style, config_path=config_path, params=params, fps=fps)
     write_bvh(output, clip := make_motion(song, config=cfg, melody_track=melody_track, rhythm_track=rhythm_track))
     if not quiet:
         click.echo("\n".join(summary_lines(clip.meta["summary"], output)))
+
+
+for _command in (stream, render, serve):  # live and viewing commands, in cli_live.py
+    cli.add_command(_command)
 
 
 def main(argv=None) -> int:

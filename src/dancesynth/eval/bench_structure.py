@@ -155,7 +155,8 @@ def structure(cfg: BenchConfig, db, progress: Progress | None = None, out_dir: P
     for name in engines:
         rows = [r for r in per_dance if r["engine"] == name]
         table_i[name] = {"chi2": _mean(r["chi2"] for r in rows), "chi2_danced": _mean(r["chi2_danced"] for r in rows),
-                         "chi2_min": _min(r["chi2"] for r in rows), "chi2_max": _max(r["chi2"] for r in rows),
+                         "chi2_min": _reduce((r["chi2"] for r in rows), np.min),
+                         "chi2_max": _reduce((r["chi2"] for r in rows), np.max),
                          "dances": len(rows), "wall_s": _mean(r["wall_s"] for r in rows)}
     mocap_metrics = _mocap_metrics(db, refs, cfg.mocap_max_clips)
     metrics = {"mocap": mocap_metrics}
@@ -166,19 +167,14 @@ def structure(cfg: BenchConfig, db, progress: Progress | None = None, out_dir: P
             "recreation": recreation(cfg, db, model, progress), "notes": list(NOTES)}
 
 
+def _reduce(values, how=np.mean):
+    """``how`` of the values that are not None (None when there are none)."""
+    v = [x for x in values if x is not None]
+    return float(how(v)) if v else None
+
+
 def _mean(values):
-    v = [x for x in values if x is not None]
-    return float(np.mean(v)) if v else None
-
-
-def _min(values):
-    v = [x for x in values if x is not None]
-    return float(np.min(v)) if v else None
-
-
-def _max(values):
-    v = [x for x in values if x is not None]
-    return float(np.max(v)) if v else None
+    return _reduce(values)
 
 
 def _mocap_metrics(db, refs: dict, max_clips: int | None) -> dict:
@@ -266,7 +262,7 @@ def recreation(cfg: BenchConfig, db, model, progress) -> dict:
                          "found_again": float(np.mean(found == wanted[:len(found)]))})
     return {"style": st.name, "song": cfg.recreate_song, "rows": rows,
             "danced_mean": _mean(r["danced"] for r in rows), "found_again_mean": _mean(r["found_again"] for r in rows),
-            "found_again_min": _min(r["found_again"] for r in rows)}
+            "found_again_min": _reduce((r["found_again"] for r in rows), np.min)}
 
 
 def format_structure(s: dict) -> str:

@@ -210,10 +210,9 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
 def _signature(config: LiveConfig, db, style, graph):
     if not config.follow_signature:
         return None
-    from ..engines.graph.signature import signature_target
-    from ..motion.motifs import load_motif_model
+    from ..engines.graph.signature import database_signature
 
-    return signature_target(style, graph, load_motif_model(db), config.render.signature_weight)
+    return database_signature(style, graph, db, config.render.signature_weight)
 
 
 def _cover_start(beats: np.ndarray, inten: np.ndarray, tempo: float) -> tuple[np.ndarray, np.ndarray]:

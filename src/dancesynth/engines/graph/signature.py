@@ -80,3 +80,10 @@ def signature_target(style: Style, graph: MetaMotionGraph, model: MotifModel,
         node_motif[has_prev[hit]] = ids[order][i[hit]]
     return SignatureTarget(node_motif, np.asarray(model.templates[model.check_genre(style.genre)], dtype=np.float64),
                            float(weight), style.genre)
+
+
+def database_signature(style: Style, graph: MetaMotionGraph, database, weight: float = DEFAULT_WEIGHT) -> SignatureTarget:
+    """``signature_target`` with the motif model of ``database`` (the shipped one for the bundled database)."""
+    from ...motion.motifs import load_motif_model
+
+    return signature_target(style, graph, load_motif_model(database), weight)

@@ -42,12 +42,11 @@ class TrainingSet:
 def _motif_ids(db: MotionDatabase, styles: list[Style]):
     """Motif ids of every word of each style, and the motif model (None when there is none)."""
     try:
-        from ...motion.motifs import load_motif_model
-        from ...motion.words import style_words
+        from ...motion.motifs import load_motif_model, style_motifs
     except ImportError:
         return [None] * len(styles), None
     model = load_motif_model(db)
-    return [model.assign(style_words(s).features) for s in styles], model
+    return [style_motifs(s, model)[1] for s in styles], model
 
 
 def training_set(genre: str = "salsa", database: MotionDatabase | str | Path | None = None,

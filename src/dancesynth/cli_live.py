@@ -1,0 +1,98 @@
+"""Command line, live and viewing: ``stream`` (a dance as music arrives), ``render`` (MP4), ``serve`` (web page)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from .cli_support import Progress, bvh_output
+from .errors import InputError
+
+
+@click.command()
+@click.argument("source")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=Path("live.bvh"),
+              show_default=True, help="BVH file that grows as the dance goes (a valid BVH after every segment).")
+@click.option("--segment-seconds", type=float, default=5.0, show_default=True, help="Length of a segment.")
+@click.option("--style", help="Style or genre to dance (default: chosen from the first segment's tempo).")
+@click.option("--fps", type=float, default=30.0, show_default=True, help="Frame rate of the output.")
+@click.option("--seed", type=int, default=None, help="Vary the dance between runs.")
+@click.option("--database", type=click.Path(file_okay=False, path_type=Path),
+              help="A database folder or a folder of BVH files (default: the bundled database).")
+@click.option("--follow-signature", is_flag=True, help="Also keep the genre's motif signature as the dance goes.")
+@click.option("--fast", is_flag=True, help="Read a file as fast as it decodes instead of at real-time pace.")
+@click.option("-q", "--quiet", is_flag=True, help="Only the summary, no line per segment.")
+def stream(source, output, segment_seconds, style, fps, seed, database, follow_signature, fast, quiet):
+    """Dance to SOURCE as it arrives: an audio file (played at real-time pace), '-' for standard input,
+    or an http(s) URL of an audio stream. Motion is synthesised segment by segment (Xu et al.'s double
+    buffer) and appended to the BVH as it goes."""
+    from .io.bvh_writer import BVHStreamWriter
+    from .live.runtime import LiveConfig, run_live
+    from .live.sources import AudioSource
+
+    bvh_output(output)
+
+    def report(r):
+        if not quiet:
+            click.echo(f"segment {r.index + 1:3d}  heard {r.audio_end_s:7.2f} s  {r.beats:3d} beats  motion "
+                       f"{r.motion_start_s:6.2f}-{r.motion_end_s:6.2f} s  step {r.process_s * 1e3:6.1f} ms "
+                       f"({100 * r.process_s / r.segment_s:4.1f}% of {r.segment_s:g} s)"
+                       f"{'  LATE' if r.late else ''}  ready at {r.ready_s:6.2f} s")
+
+    config = LiveConfig(segment_s=segment_seconds, style=style, fps=fps, seed=seed, database=database,
+                        follow_signature=follow_signature)
+    with AudioSource(source, realtime=not fast) as src, BVHStreamWriter(output) as writer:
+        summary = run_live(src, writer.append, config=config, on_report=report, realtime=not fast)
+    if summary["frames"] == 0:
+        raise InputError(f"{source}: the stream ended before a single segment could be danced")
+    click.echo(f"style     {summary['style']}, {summary['tempo_bpm']:.1f} bpm")
+    click.echo(f"segments  {summary['segments']} of {segment_seconds:g} s, step median "
+               f"{summary['step_s_median'] * 1e3:.1f} ms, max {summary['step_s_max'] * 1e3:.1f} ms, "
+               f"{summary['late_segments']} late")
+    click.echo(f"latency   first motion ready {summary['first_motion_ready_s']:.2f} s after start "
+               f"({summary['first_audio_s']:.2f} s of audio heard)"
+               + (f"; {summary['silence_s']:.1f} s of stalls bridged" if summary["silence_s"] > 0 else ""))
+    if summary["motif_chi2"] is not None:
+        click.echo(f"motifs    chi2 to the genre template {summary['motif_chi2']:.3f}")
+    click.echo(f"wrote     {output} ({summary['frames']} frames at {fps:g} fps)")
+
+
+@click.command()
+@click.argument("dance_path", metavar="DANCE.bvh", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("song", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
+              help="MP4 to write (default: the dance's name with .mp4, here).")
+@click.option("--width", type=int, default=960, show_default=True)
+@click.option("--height", type=int, default=540, show_default=True)
+@click.option("--fps", type=float, default=None, help="Video frame rate (default: the dance's).")
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+def render(dance_path, song, output, width, height, fps, quiet):
+    """Render DANCE.bvh as an MP4 video (H.264) with SONG muxed in sync (AAC)."""
+    from .export.video import render_video_files
+
+    output = output or Path(dance_path.stem + ".mp4")
+    progress = Progress(enabled=not quiet and sys.stderr.isatty())
+    try:
+        info = render_video_files(dance_path, song, output, width=width, height=height, fps=fps,
+                                  progress=lambda done, total: progress("render", done, total))
+    finally:
+        progress.close()
+    click.echo(f"wrote {output}: {info['frames']} frames at {info['fps']:g} fps, {info['duration_s']:.1f} s, "
+               f"rendered in {info['seconds']:.1f} s")
+
+
+@click.command()
+@click.option("--host", default="127.0.0.1", show_default=True,
+              help="Address to listen on (127.0.0.1: this machine only; 0.0.0.0: every network).")
+@click.option("--port", type=click.IntRange(1, 65535), default=8000, show_default=True, help="Port to listen on.")
+@click.option("--database", type=click.Path(file_okay=False, path_type=Path),
+              help="A database folder or a folder of BVH files (default: the bundled database).")
+@click.option("--max-upload-mb", type=click.FloatRange(min=0.1), default=50.0, show_default=True,
+              help="Refuse uploaded songs larger than this.")
+def serve(host, port, database, max_upload_mb):
+    """A web page to watch the character dance: open http://HOST:PORT/ in a browser."""
+    from .web.server import serve as run_server
+
+    run_server(host=host, port=port, database=database, max_upload_mb=max_upload_mb)
