@@ -125,6 +125,10 @@ class MusicFeatures:
     intensity of Xu et al. ``beat_confidence`` says how clearly the audio pulses
     (see ``dancesynth.music``); ``default_tempo`` is set when no clear beat was found
     and the beats are a steady grid at a stated tempo instead.
+
+    Metre: ``beats_per_bar`` (3 for a waltz, 4 for most pop) and ``beat_in_bar``
+    ``(B,)``, each beat's position in its bar counted from 0 (0 = a downbeat, the
+    bar's "1"); ``None`` when the metre is unknown.
     """
 
     duration_s: float
@@ -135,6 +139,8 @@ class MusicFeatures:
     default_tempo: bool = False
     source: str = ""
     meta: dict = field(default_factory=dict)
+    beats_per_bar: int | None = None
+    beat_in_bar: np.ndarray | None = None
 
     def __post_init__(self):
         self.beat_times_s = np.asarray(self.beat_times_s, dtype=np.float64)
@@ -143,7 +149,17 @@ class MusicFeatures:
             raise ValueError("beat_times_s must be strictly increasing")
         if self.intensity_db.shape != (max(len(self.beat_times_s) - 1, 0),):
             raise ValueError("intensity_db needs one value per beat interval")
+        if self.beat_in_bar is not None:
+            self.beat_in_bar = np.asarray(self.beat_in_bar, dtype=np.int64)
+            if (self.beats_per_bar is None or self.beat_in_bar.shape != self.beat_times_s.shape
+                    or np.any(self.beat_in_bar < 0) or np.any(self.beat_in_bar >= self.beats_per_bar)):
+                raise ValueError("beat_in_bar needs one position in [0, beats_per_bar) per beat")
 
     @property
     def n_beats(self) -> int:
         return len(self.beat_times_s)
+
+    @property
+    def downbeat_times_s(self) -> np.ndarray | None:
+        """The bars' first beats (seconds), or ``None`` when the metre is unknown."""
+        return None if self.beat_in_bar is None else self.beat_times_s[self.beat_in_bar == 0]

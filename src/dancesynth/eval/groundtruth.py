@@ -2,19 +2,21 @@
 
 Beat trackers are measured against ground truth that nobody annotated by ear: each
 song is generated as MIDI (``mido``) from a ``SongSpec`` -- a tempo map (constant,
-a step, or a ramp), a meter (3/4 or 4/4), straight or swung eighths, with or
-without a drum kit -- so its beat times follow from the tempo map alone. The MIDI
-is rendered with ``fluidsynth`` and a General MIDI soundfont (Debian packages
-``fluidsynth`` and ``timgm6mb-soundfont`` or ``fluid-soundfont-gm``).
+a step, or a ramp), a meter (3/4 or 4/4), an optional pickup (the last beats of a
+bar before the first full bar, as many songs begin), straight or swung eighths,
+with or without a drum kit -- so its beat times and bar positions follow from the
+spec alone. The MIDI is rendered with ``fluidsynth`` and a General MIDI soundfont
+(Debian packages ``fluidsynth`` and ``timgm6mb-soundfont`` or ``fluid-soundfont-gm``).
 
 Tempo changes happen only on beats (a ramp changes tempo at every beat), and each
 beat's length is computed from the integer microseconds-per-beat stored in the MIDI
 file, so the beat times are exact to the microsecond; ``write_midi`` returns them.
 
-The music: bass on the beats, piano chords (a waltz "oom-pah-pah" in 3/4), a
+The music: bass on the beats, piano chords (a waltz "oom-pah-pah" in 3/4) that
+follow I-V-vi-IV with a new chord on the bar line every ``bars_per_chord`` bars, a
 seeded melody of quarter, eighth and half notes on a pentatonic scale, and, with
 drums, kick and snare on the beats and hi-hat eighths. Velocities accent the
-downbeat a little, as players do; nothing else marks the beat.
+downbeat a little, as players do; nothing else marks the beat or the bar.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ import hashlib
 import json
 import shutil
 import subprocess
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -40,7 +42,7 @@ SOUNDFONTS = (
     "/usr/share/sounds/sf2/FluidR3_GM.sf2",
 )
 # Bump when the music written for a spec changes, so cached renders are redone.
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 2  # 2: pickups, chords held for bars_per_chord bars, bar positions
 
 _KICK, _SNARE, _HAT = 36, 38, 42
 _BASS_PROGRAM, _PIANO_PROGRAM = 33, 0
@@ -56,7 +58,10 @@ class SongSpec:
 
     ``tempo``: ``(bpm,)`` constant, ``(bpm_a, bpm_b)`` with ``kind="step"`` (the
     tempo jumps at the middle bar) or ``kind="ramp"`` (the tempo moves linearly from
-    a to b between 25% and 75% of the song, beat by beat).
+    a to b between 25% and 75% of the song, beat by beat). ``pickup_beats``: the
+    song starts with the last that many beats of a bar (an anacrusis), so its first
+    downbeat is beat ``pickup_beats``. ``bars_per_chord``: how long each chord of
+    the progression lasts.
     """
 
     name: str
@@ -67,24 +72,35 @@ class SongSpec:
     swing: bool = False
     duration_s: float = 30.0
     seed: int = 0
+    pickup_beats: int = 0
+    bars_per_chord: int = 1
 
     @property
     def tags(self) -> dict:
-        return {"tempo": self.kind, "meter": f"{self.beats_per_bar}/4", "drums": self.drums, "swing": self.swing}
+        return {"tempo": self.kind, "meter": f"{self.beats_per_bar}/4", "drums": self.drums, "swing": self.swing,
+                "pickup": self.pickup_beats}
 
 
 @dataclass(frozen=True)
 class GroundTruthSong:
+    """A rendered song and its truth: beat times, and each beat's position in its bar (0 = downbeat)."""
+
     name: str
     audio_path: Path
     midi_path: Path
     beats_s: np.ndarray
     duration_s: float
     tags: dict = field(default_factory=dict)
+    beat_in_bar: np.ndarray | None = None
+    beats_per_bar: int | None = None
+
+    @property
+    def downbeats_s(self) -> np.ndarray | None:
+        return None if self.beat_in_bar is None else self.beats_s[self.beat_in_bar == 0]
 
 
 def song_specs(*, quick: bool = False) -> list[SongSpec]:
-    """The benchmark's song set: 60-180 bpm, steps, ramps, swing, 3/4 and 4/4, with and without drums.
+    """The benchmark's song set: 60-180 bpm, steps, ramps, swing, 3/4 and 4/4, pickups, with and without drums.
 
     ``quick`` keeps 8 songs covering every kind.
     """
@@ -101,6 +117,10 @@ def song_specs(*, quick: bool = False) -> list[SongSpec]:
     specs += [SongSpec("ramp80-130_4-4_drums", (80, 130), kind="ramp", seed=10),
               SongSpec("ramp160-110_4-4_drums", (160, 110), kind="ramp", seed=11),
               SongSpec("ramp100-140_4-4_nodrums", (100, 140), kind="ramp", drums=False, seed=12)]
+    # Songs start on any beat of the bar (only 8 of the 25 on a downbeat, so counting
+    # bars from the first beat is wrong for most), and every third holds its chords two bars.
+    specs = [replace(s, pickup_beats=i % s.beats_per_bar, bars_per_chord=2 if i % 3 == 2 else 1)
+             for i, s in enumerate(specs)]
     if quick:
         keep = {"const60_4-4_drums", "const120_4-4_drums", "const180_4-4_drums", "const110_4-4_nodrums",
                 "const135_3-4_drums", "swing125_4-4_drums", "step90-120_4-4_drums", "ramp80-130_4-4_drums"}
@@ -109,7 +129,14 @@ def song_specs(*, quick: bool = False) -> list[SongSpec]:
 
 
 def beat_tempi(spec: SongSpec) -> np.ndarray:
-    """Tempo (bpm) of every beat of the song, whole bars, covering ``spec.duration_s``."""
+    """Tempo (bpm) of every beat of the song: the pickup, then whole bars covering ``spec.duration_s``."""
+    if not (isinstance(spec.beats_per_bar, int) and 1 <= spec.beats_per_bar <= 16):
+        raise InputError(f"{spec.name}: beats_per_bar must be a whole number from 1 to 16, got {spec.beats_per_bar!r}")
+    if not (isinstance(spec.pickup_beats, int) and 0 <= spec.pickup_beats < spec.beats_per_bar):
+        raise InputError(f"{spec.name}: pickup_beats must be a whole number from 0 to beats_per_bar - 1 "
+                         f"({spec.beats_per_bar - 1}), got {spec.pickup_beats!r}")
+    if not (isinstance(spec.bars_per_chord, int) and spec.bars_per_chord >= 1):
+        raise InputError(f"{spec.name}: bars_per_chord must be a positive whole number, got {spec.bars_per_chord!r}")
     if spec.kind not in ("constant", "step", "ramp"):
         raise InputError(f"unknown tempo kind {spec.kind!r}; use constant, step or ramp")
     if spec.kind == "constant" and len(spec.tempo) != 1 or spec.kind != "constant" and len(spec.tempo) != 2:
@@ -118,8 +145,9 @@ def beat_tempi(spec: SongSpec) -> np.ndarray:
         raise InputError(f"{spec.name}: tempi must be between 20 and 400 bpm, got {spec.tempo}")
     a = spec.tempo[0]
     b = spec.tempo[-1]
+    pickup = spec.pickup_beats
     # Enough beats at the faster tempo, trimmed to whole bars below.
-    n = int(np.ceil(spec.duration_s * max(a, b) / 60.0)) + spec.beats_per_bar
+    n = int(np.ceil(spec.duration_s * max(a, b) / 60.0)) + spec.beats_per_bar + pickup
     if spec.kind == "constant":
         tempi = np.full(n, a)
     else:
@@ -127,10 +155,10 @@ def beat_tempi(spec: SongSpec) -> np.ndarray:
         n = max(n, n_mean)
         idx = np.arange(n)
         if spec.kind == "step":
-            half = _beats_until(a, spec.duration_s / 2, spec.beats_per_bar)
+            half = pickup + _beats_until(a, spec.duration_s / 2, spec.beats_per_bar)
             tempi = np.where(idx < half, a, b).astype(float)
         else:
-            start = _beats_until(a, spec.duration_s / 4, spec.beats_per_bar)
+            start = pickup + _beats_until(a, spec.duration_s / 4, spec.beats_per_bar)
             # The ramp spans half the song at the mean tempo.
             length = max(int(round(spec.duration_s / 2 * (a + b) / 120.0)), 1)
             frac = np.clip((idx - start) / length, 0.0, 1.0)
@@ -139,7 +167,7 @@ def beat_tempi(spec: SongSpec) -> np.ndarray:
     us = microseconds_per_beat(tempi)
     ends = np.cumsum(us) / 1e6
     n_beats = int(np.searchsorted(ends, spec.duration_s)) + 1
-    n_beats = int(np.ceil(n_beats / spec.beats_per_bar)) * spec.beats_per_bar
+    n_beats = pickup + int(np.ceil(max(n_beats - pickup, 0) / spec.beats_per_bar)) * spec.beats_per_bar
     return tempi[:n_beats]
 
 
@@ -151,6 +179,12 @@ def _beats_until(bpm: float, seconds: float, beats_per_bar: int) -> int:
 def microseconds_per_beat(tempi_bpm: np.ndarray) -> np.ndarray:
     """The integer tempo a MIDI file stores for each beat."""
     return np.round(60e6 / np.asarray(tempi_bpm, dtype=np.float64)).astype(np.int64)
+
+
+def beat_positions(spec: SongSpec) -> np.ndarray:
+    """Each beat's position in its bar, from 0 (the downbeat): the pickup's beats are the last of a bar."""
+    n = len(beat_tempi(spec))
+    return (np.arange(n) - spec.pickup_beats) % spec.beats_per_bar
 
 
 def beat_times(spec: SongSpec) -> np.ndarray:
@@ -173,6 +207,8 @@ def write_midi(spec: SongSpec, path: Path) -> np.ndarray:
     events: dict[str, list[tuple[float, mido.Message]]] = {"bass": [], "piano": [], "melody": [], "drums": []}
 
     def note(part: str, channel: int, pitch: int, start_beat: float, length_beats: float, velocity: int):
+        if start_beat < 0:  # the part of the pickup's bar before the song starts
+            return
         events[part].append((start_beat, mido.Message("note_on", channel=channel, note=pitch, velocity=velocity)))
         events[part].append((start_beat + length_beats * 0.95,
                              mido.Message("note_off", channel=channel, note=pitch, velocity=0)))
@@ -180,9 +216,11 @@ def write_midi(spec: SongSpec, path: Path) -> np.ndarray:
     offbeat = 2.0 / 3.0 if spec.swing else 0.5
     melody_pitch = 3  # index into the melody's scale
     scale = [key + 24 + 12 * octave + step for octave in range(3) for step in _PENTATONIC]
-    for bar in range(n_beats // bpb):
-        first = bar * bpb
-        degree = _PROGRESSION[bar % len(_PROGRESSION)]
+    pickup = spec.pickup_beats
+    # Bar -1 is the pickup: only its last ``pickup`` beats sound.
+    for bar in range(-1 if pickup else 0, (n_beats - pickup) // bpb):
+        first = bar * bpb + pickup
+        degree = _PROGRESSION[(bar // spec.bars_per_chord) % len(_PROGRESSION)]
         root = key + degree
         third = 3 if degree in _MINOR_DEGREE else 4
         chord = [root + 12, root + 12 + third, root + 19]
@@ -224,12 +262,16 @@ def write_midi(spec: SongSpec, path: Path) -> np.ndarray:
 
     mid = mido.MidiFile(type=1, ticks_per_beat=TICKS_PER_BEAT)
     conductor = mido.MidiTrack()
-    conductor.append(mido.MetaMessage("time_signature", numerator=bpb, denominator=4, time=0))
+    # A pickup is a short first bar (pickup/4), so MIDI readers put the bar lines where the music does.
+    meta = [(0, mido.MetaMessage("time_signature", numerator=pickup or bpb, denominator=4))]
+    if pickup:
+        meta.append((pickup * TICKS_PER_BEAT, mido.MetaMessage("time_signature", numerator=bpb, denominator=4)))
+    meta += [(i * TICKS_PER_BEAT, mido.MetaMessage("set_tempo", tempo=int(tempo)))
+             for i, tempo in enumerate(us) if i == 0 or tempo != us[i - 1]]
     last_tick = 0
-    for i, tempo in enumerate(us):
-        if i == 0 or tempo != us[i - 1]:
-            conductor.append(mido.MetaMessage("set_tempo", tempo=int(tempo), time=i * TICKS_PER_BEAT - last_tick))
-            last_tick = i * TICKS_PER_BEAT
+    for tick, msg in sorted(meta, key=lambda e: e[0]):
+        conductor.append(msg.copy(time=tick - last_tick))
+        last_tick = tick
     mid.tracks.append(conductor)
     programs = {"bass": (1, _BASS_PROGRAM), "piano": (2, _PIANO_PROGRAM),
                 "melody": (3, _MELODY_PROGRAMS[spec.seed % len(_MELODY_PROGRAMS)])}
@@ -275,21 +317,23 @@ def render_midi(midi_path: Path, wav_path: Path, *, soundfont: Path | None = Non
 
 
 def render_song(spec: SongSpec, out_dir: Path, *, soundfont: Path | None = None) -> GroundTruthSong:
-    """The song's MIDI, wav and beat list in ``out_dir`` (made only when missing)."""
+    """The song's MIDI, wav and truth (``NAME.beats.json``: beats, bar positions) in ``out_dir``, made when missing."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     midi_path = out_dir / f"{spec.name}.mid"
     wav_path = out_dir / f"{spec.name}.wav"
     beats_path = out_dir / f"{spec.name}.beats.json"
-    beats = beat_times(spec)
+    beats, positions = beat_times(spec), beat_positions(spec)
     if not midi_path.is_file():
         write_midi(spec, midi_path)
     if not wav_path.is_file():
         render_midi(midi_path, wav_path, soundfont=soundfont)
     if not beats_path.is_file():
         with atomic_output(beats_path) as fh:
-            fh.write(json.dumps({"beats": beats.tolist(), "spec": asdict(spec)}, indent=1))
-    return GroundTruthSong(spec.name, wav_path, midi_path, beats, spec.duration_s, spec.tags)
+            fh.write(json.dumps({"beats": beats.tolist(), "beat_in_bar": positions.tolist(),
+                                 "beats_per_bar": spec.beats_per_bar, "spec": asdict(spec)}, indent=1))
+    return GroundTruthSong(spec.name, wav_path, midi_path, beats, spec.duration_s, spec.tags,
+                           beat_in_bar=positions, beats_per_bar=spec.beats_per_bar)
 
 
 def ground_truth_set(cache_dir: Path, *, quick: bool = False, specs: list[SongSpec] | None = None,

@@ -59,6 +59,8 @@ class SegmentReport:
     silence_s: float          # silence fed for stalls so far
     beat_times_s: tuple = ()  # the music beats this segment dances to (stream time)
     tempo_bpm: float = 0.0    # the tracker's tempo when the segment was cut
+    beat_in_bar: tuple = ()   # per beat of beat_times_s, its position in its bar (0 = downbeat)
+    beats_per_bar: int = 4    # the metre the tracker counted those beats in
 
     @property
     def late(self) -> bool:
@@ -77,7 +79,7 @@ class _Worker:
         self.reports: list[SegmentReport] = []
 
     def run(self, index: int, segment: MusicSegment, audio_end_s: float, segment_s: float, silence_s: float,
-            beats: tuple, tempo: float):
+            beats: tuple, tempo: float, bars: tuple = (), beats_per_bar: int = 4):
         t = time.perf_counter()
         self.state, out = self.engine.step(self.state, segment)
         process_s = time.perf_counter() - t
@@ -86,7 +88,8 @@ class _Worker:
         self.frames += clip.n_frames
         self.on_frames(clip)
         report = SegmentReport(index, audio_end_s, len(segment.intensity_db), start, self.frames / self.fps,
-                               process_s, segment_s, time.perf_counter() - self.t0, silence_s, beats, tempo)
+                               process_s, segment_s, time.perf_counter() - self.t0, silence_s, beats, tempo,
+                               bars, beats_per_bar)
         self.reports.append(report)
         if self.on_report is not None:
             self.on_report(report)
@@ -118,10 +121,12 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
     worker: _Worker | None = None
     futures = []
     prev_beat: float | None = None
+    prev_bar = 0
     next_cut = config.segment_s
     index = 0
     ended = False
     tempo = 0.0
+    metre = 4
     try:
         while not ended:
             if stop is not None and stop.is_set():
@@ -149,6 +154,7 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
             tempo = update.tempo_bpm or tempo
             beats = np.asarray(update.beat_times_s, dtype=np.float64)
             inten = np.asarray(update.intensity_db, dtype=np.float64)
+            bars, metre = np.asarray(update.beat_in_bar, dtype=np.int64), update.beats_per_bar
             next_cut = heard_s + config.segment_s
             if worker is None:
                 if beats.size < 2 and not ended:
@@ -160,12 +166,16 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
                 worker = _Worker(GraphEngine(style, graph, config.render, fps=config.fps,
                                              signature=_signature(config, db, style, graph)),
                                  config.seed, on_frames, on_report, t0, config.fps)
-                beats, inten = _cover_start(beats, inten, tempo)
-                prev_beat = float(beats[0])
-                beats, inten = beats[1:], inten
+                covered, inten = _cover_start(beats, inten, tempo)
+                # The beats made up before the first heard one count backwards in its bar.
+                bars = np.concatenate(((bars[0] - np.arange(covered.size - beats.size, 0, -1)) % metre, bars))
+                beats = covered
+                prev_beat, prev_bar = float(beats[0]), int(bars[0])
+                beats, inten, bars = beats[1:], inten, bars[1:]
             if beats.size == 0 and not ended:
                 continue
             times = np.concatenate(([prev_beat], beats))
+            positions = np.concatenate(([prev_bar], bars))
             end_s = None
             if ended:
                 # The last segment renders to the end of what was heard: carry the beat on to it.
@@ -174,13 +184,16 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
                 n_after = int(np.ceil((end_s - times[-1]) / period - 1e-9)) if times.size < 2 or end_s > times[-1] else 0
                 n_after = max(n_after, 1 if times.size < 2 else 0)
                 times = np.concatenate((times, times[-1] + period * np.arange(1, n_after + 1)))
+                positions = np.concatenate((positions, (positions[-1] + np.arange(1, n_after + 1)) % metre))
                 last = inten[-1] if inten.size else 0.0
                 inten = np.concatenate((inten, np.full(n_after, last)))
-            segment = MusicSegment(times, inten, remaining_beats=None, end_s=end_s)
+            segment = MusicSegment(times, inten, remaining_beats=None, end_s=end_s, bar_position=positions,
+                                   beats_per_bar=metre)
             new_beats = tuple(float(t) for t in (times if index == 0 else times[1:]))
+            new_bars = tuple(int(p) for p in (positions if index == 0 else positions[1:]))
             futures.append(executor.submit(worker.run, index, segment, heard_s, config.segment_s, silence_s,
-                                           new_beats, tempo))
-            prev_beat = float(times[-1])
+                                           new_beats, tempo, new_bars, metre))
+            prev_beat, prev_bar = float(times[-1]), int(positions[-1])
             index += 1
         for f in futures:
             f.result()  # re-raise a failure of the worker here
@@ -193,6 +206,7 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
         "motif_chi2": chi2(worker.engine.signature.template, counts) if counts is not None and counts.sum() else None,
         "style": worker.engine.style.name if worker else None,
         "tempo_bpm": tempo,
+        "beats_per_bar": metre,
         "heard_s": heard_s,
         "silence_s": silence_s,
         "segments": len(reports),

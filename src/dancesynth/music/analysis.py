@@ -1,4 +1,4 @@
-"""From a song to ``MusicFeatures``: beats, tempo, beat confidence, per-beat intensity.
+"""From a song to ``MusicFeatures``: beats, tempo, beat confidence, per-beat intensity, metre and downbeats.
 
 ``analyze_music`` takes a file or samples (librosa style, keyword-only), checks
 that there is something to dance to, tracks the beats, and falls back to a steady
@@ -18,6 +18,7 @@ from ..types import MusicFeatures
 from .beats import (DEFAULT_TRACKER, MIN_BEATS, MIN_CONFIDENCE, TRACKERS, beat_onset_db, steady_beat_grid,
                     track_beats)
 from .intensity import beat_intensity_db, rms_db
+from .metre import track_metre
 from .onset import ANALYSIS_SR, HOP_LENGTH, onset_envelope
 
 # Below this peak level a file is "silent" (a 16-bit file's dither sits near -90 dBFS,
@@ -45,7 +46,10 @@ def analyze_music(*, path=None, y: np.ndarray | None = None, sr: int | None = No
     ``min_confidence``, the audio has no clear beat: the beats become a steady grid
     at ``fallback_bpm`` from 0 s to the end, with ``default_tempo=True``.
     ``intensity_db`` is the RMS level (dB re full scale, floored at -100 dB) of
-    each beat interval.
+    each beat interval. ``beats_per_bar`` (3 or 4) and ``beat_in_bar`` come from
+    ``dancesynth.music.metre.track_metre`` (``meta["metre_confidence"]`` in [0, 1]
+    says how sure it is); the fallback grid counts 4/4 from its first beat with
+    confidence 0.
 
     Raises ``InputError`` for unusable input: a bad file (see ``load_audio``),
     audio shorter than ``min_duration_s`` or longer than ``max_duration_s``, or
@@ -83,6 +87,8 @@ def analyze_music(*, path=None, y: np.ndarray | None = None, sr: int | None = No
         beat_times_s, tempo_bpm = tracked_s, tracked_bpm
     else:
         beat_times_s, tempo_bpm = steady_beat_grid(duration_s, fallback_bpm), float(fallback_bpm)
+    beats_per_bar, beat_in_bar, metre_confidence = track_metre(samples, rate, beat_times_s=beat_times_s,
+                                                               end_s=duration_s, steady_grid=not clear)
 
     return MusicFeatures(
         duration_s=duration_s,
@@ -92,6 +98,8 @@ def analyze_music(*, path=None, y: np.ndarray | None = None, sr: int | None = No
         beat_confidence=float(confidence),
         default_tempo=not clear,
         source=name,
+        beats_per_bar=beats_per_bar,
+        beat_in_bar=beat_in_bar,
         meta={
             "tracker": tracker,
             "analysis_sr": rate,
@@ -102,6 +110,7 @@ def analyze_music(*, path=None, y: np.ndarray | None = None, sr: int | None = No
             "beat_onset_db": beat_onset_db(onset_env, np.round(tracked_s * rate / HOP_LENGTH).astype(int)),
             "min_confidence": float(min_confidence),
             "peak_db": peak_db,
+            "metre_confidence": metre_confidence,
         },
     )
 
