@@ -9,7 +9,7 @@ from typing import Callable
 
 import numpy as np
 
-from .engines.beatgrid import BeatGrid, beat_grid, choose_style
+from .engines.beatgrid import BeatGrid, beat_grid, fit_style, fit_summary
 from .engines.graph.cache import load_graph
 from .engines.graph.engine import EngineConfig, GraphEngine, MusicSegment, SegmentFrames
 from .engines.graph.meta_graph import GraphConfig
@@ -74,11 +74,16 @@ def segment_bounds(times_s: np.ndarray, segment_s: float) -> list[tuple[int, int
 
 
 def synthesise(engine: GraphEngine, grid: BeatGrid, duration_s: float, config: DanceConfig,
-               progress: Progress | None = None) -> tuple[list[SegmentFrames], dict]:
-    """Run the chosen engine over a beat grid; returns the rendered segments and step timings."""
+               progress: Progress | None = None, music: MusicFeatures | None = None
+               ) -> tuple[list[SegmentFrames], dict]:
+    """Run the chosen engine over a beat grid; returns the rendered segments and step timings.
+
+    With ``music``, its metre (``beat_in_bar``) goes to the engine with each segment."""
+    bars, beats_per_bar = grid_bar_positions(grid.times_s, music)
     if config.engine == "global":
         t = time.perf_counter()
-        out = [engine.run_global(grid.times_s, grid.intensity_db, duration_s, seed=config.seed)]
+        out = [engine.run_global(grid.times_s, grid.intensity_db, duration_s, seed=config.seed,
+                                 bar_position=bars, beats_per_bar=beats_per_bar, music_beat=grid.is_music_beat)]
         return out, {"segments": 1, "step_s": [time.perf_counter() - t], "boundaries_s": np.zeros(0)}
     state = engine.initial_state(config.seed)
     bounds = segment_bounds(grid.times_s, config.segment_s)
@@ -86,7 +91,9 @@ def synthesise(engine: GraphEngine, grid: BeatGrid, duration_s: float, config: D
     for i, (b, e) in enumerate(bounds):
         last = i == len(bounds) - 1
         seg = MusicSegment(grid.times_s[b:e + 1], grid.intensity_db[b:e],
-                           remaining_beats=grid.n_intervals - e, end_s=duration_s if last else None)
+                           remaining_beats=grid.n_intervals - e, end_s=duration_s if last else None,
+                           bar_position=bars[b:e + 1], beats_per_bar=beats_per_bar,
+                           music_beat=grid.is_music_beat[b:e + 1])
         t = time.perf_counter()
         state, frames = engine.step(state, seg)
         step_s.append(time.perf_counter() - t)
@@ -95,6 +102,19 @@ def synthesise(engine: GraphEngine, grid: BeatGrid, duration_s: float, config: D
             progress("synthesis", i + 1, len(bounds))
     return out, {"segments": len(bounds), "step_s": step_s,
                  "boundaries_s": grid.times_s[[e for _, e in bounds[:-1]]]}
+
+
+def grid_bar_positions(grid_times_s: np.ndarray, music: MusicFeatures | None) -> tuple[np.ndarray, int | None]:
+    """Each grid beat's position in its bar (-1 where it is no music beat or the metre is unknown)."""
+    out = np.full(len(grid_times_s), -1, dtype=np.int64)
+    if music is None or music.beat_in_bar is None:
+        return out, None
+    beats = music.beat_times_s
+    i = np.clip(np.searchsorted(beats, grid_times_s), 0, len(beats) - 1)
+    for j in (i, np.maximum(i - 1, 0)):  # the grid holds the music's beats as they are, give or take rounding
+        hit = np.abs(beats[j] - grid_times_s) < 1e-6
+        out[hit] = music.beat_in_bar[j[hit]]
+    return out, music.beats_per_bar
 
 
 def analyse(song, max_duration_s: float = 15 * 60.0) -> MusicFeatures:
@@ -134,7 +154,9 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
         timings["database_s"] = time.perf_counter() - t
         return choreography_dance(music, db, config, timings=timings,
                                   song=music.source if isinstance(song, MusicFeatures) else str(song))
-    style, subdivide = choose_style(db, music.tempo_bpm, config.style)
+    # The style and metrical level that warp the beat pieces least (engines/beatgrid.py).
+    fit = fit_style(db, music, config.style)
+    style, subdivide = fit.style, fit.subdivide
     timings["database_s"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -149,7 +171,7 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
 
         signature = database_signature(style, graph, db, config.render.signature_weight)
     engine = GraphEngine(style, graph, config.render, fps=config.fps, signature=signature)
-    segments, stats = synthesise(engine, grid, music.duration_s, config, progress)
+    segments, stats = synthesise(engine, grid, music.duration_s, config, progress, music)
     timings["synthesis_s"] = time.perf_counter() - t
 
     local = np.concatenate([s.local_rot for s in segments])
@@ -176,10 +198,10 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
         "transition_times_s": jumps,
         "segment_times_s": stats["boundaries_s"],
         "source_frames": np.concatenate([s.source_pos for s in segments]),
-        "warp_rates": np.concatenate([(s.pieces.f1 - s.pieces.f0) / (s.pieces.t1 - s.pieces.t0) / style.fps
-                                      for s in segments]),
+        "warp_rates": np.concatenate([s.warp_rates(style.fps) for s in segments]),
         "style": style.name,
     }
+    summary.update(fit_summary(fit, music, meta["warp_rates"]))  # level, expected/actual warp, warnings
     if signature is not None:
         from .motion.motifs import chi2
 

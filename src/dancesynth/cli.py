@@ -91,13 +91,21 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
         write_json(report_path, dance_report(clip))
     s = clip.meta["summary"]
     s["timings_s"]["write_s"] = time.perf_counter() - t
+    for warning in s.get("warnings", ()):  # also with --quiet: the dance is not what the user may expect
+        click.echo(f"warning: {warning}", err=True)
     if quiet:
         return
     tm = s["timings_s"]
     note = " (no clear beat: dancing at a steady default tempo)" if s["default_tempo"] else ""
     click.echo(f"song      {song}  {s['duration_s']:.1f} s")
     click.echo(f"tempo     {s['tempo_bpm']:.1f} bpm, {s['beats']} beats{note}")
-    click.echo(f"style     {s['style']}" + (" (dancing double time)" if s["subdivide"] > 1 else ""))
+    level = s.get("level", "beat")
+    warp = ""
+    if s.get("in_range_expected") is not None:  # beat pieces played within the natural range of speeds
+        lo, hi = s["rate_range"]
+        done = f", {s['in_range_actual']:.0%} danced" if s.get("in_range_actual") is not None else ""
+        warp = f"; beat pieces at {lo:g}-{hi:g}x their captured speed: {s['in_range_expected']:.0%} expected{done}"
+    click.echo(f"style     {s['style']}, " + ("on the beat" if level == "beat" else f"at {level}") + warp)
     if s["engine"] == "streaming":
         click.echo(f"engine    streaming: {s['segments']} segment(s) of {s['segment_s']:g} s, "
                    f"{s['transitions']} transitions, median {s['step_s_median'] * 1e3:.1f} ms per segment")
@@ -199,26 +207,41 @@ def motifs(dance_path, genre, json_path, plot_path, database):
 @cli.command()
 @click.argument("song", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the beats as JSON: {\"beats\": [seconds...], \"tempo\": bpm, ...}.")
+              help="Write the beats as JSON: {\"beats\": [seconds...], \"tempo\": bpm, \"downbeats\": [seconds...], "
+                   "\"beats_per_bar\": 3 or 4, \"beat_in_bar\": [0 = downbeat...], \"bar\": [1...], ...}.")
 @click.option("--tracker", default=None, help="Beat tracker (default: the product's, 'varying').")
 def beats(song, json_path, tracker):
-    """Print the beats dancesynth hears in SONG (the ones `dance` lands motion beats on)."""
+    """Print the beats and bars dancesynth hears in SONG (the beats `dance` lands motion beats on).
+
+    Bars are numbered from 1 on the first beat; a new bar starts on every downbeat
+    (so the beats of a pickup before the first downbeat are bar 1).
+    """
     from .music import DEFAULT_TRACKER, TRACKERS, analyze_music
 
     tracker = tracker or DEFAULT_TRACKER
     if tracker not in TRACKERS:
         raise InputError(f"unknown tracker {tracker!r}; choose one of {', '.join(sorted(TRACKERS))}")
     music = analyze_music(path=song, tracker=tracker)
+    downbeat = [int(p) == 0 for p in music.beat_in_bar]
+    bar, number = [], 0 if downbeat[:1] == [True] else 1
+    for d in downbeat:
+        number += d
+        bar.append(number)
     data = {"beats": [round(float(b), 4) for b in music.beat_times_s], "tempo": round(music.tempo_bpm, 2),
             "duration_s": round(music.duration_s, 3), "confidence": round(music.beat_confidence, 3),
             "default_tempo": bool(music.default_tempo), "tracker": tracker,
-            "intensity_db": [round(float(v), 2) for v in music.intensity_db]}
+            "intensity_db": [round(float(v), 2) for v in music.intensity_db],
+            "downbeats": [round(float(b), 4) for b in music.downbeat_times_s], "beats_per_bar": music.beats_per_bar,
+            "beat_in_bar": music.beat_in_bar.tolist(), "bar": bar,
+            "metre_confidence": round(float(music.meta["metre_confidence"]), 3)}
     if json_path is not None:
         write_json(json_path, data)
     note = " (no clear beat: a steady default tempo)" if music.default_tempo else ""
     click.echo(f"{song}: {music.duration_s:.1f} s, {music.tempo_bpm:.1f} bpm, {len(music.beat_times_s)} beats, "
                f"confidence {music.beat_confidence:.2f}{note}")
-    click.echo(" ".join(f"{b:.3f}" for b in music.beat_times_s))
+    click.echo(f"metre {music.beats_per_bar}/4 (confidence {music.meta['metre_confidence']:.2f}), "
+               f"{bar[-1] if bar else 0} bars; '|' marks a downbeat")
+    click.echo(" ".join(("| " if d else "") + f"{b:.3f}" for b, d in zip(music.beat_times_s, downbeat)))
 
 
 @cli.command("eval")

@@ -11,7 +11,7 @@ style's mocap, time-scaled to the beat.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -20,7 +20,7 @@ from ...motion.database import MotionDatabase, Style
 from ...motion.motifs import chi2, load_motif_model, parse_motif_id
 from ...motion.words import clip_words
 from ...types import MotionClip, MusicFeatures
-from ..beatgrid import beat_grid, choose_style
+from ..beatgrid import StyleFit, beat_grid, fit_style, fit_summary
 from .level import constraint_beats, parse_motif_at, plan_motifs, recreate_plan
 from .mixer import Mix, MixerConfig, mix, substitute_motifs, word_bank
 
@@ -66,14 +66,15 @@ def reference_motifs(path, model, styles) -> Reference:
     return Reference(str(path), ids, model.nearest_genre(model.signature(ids)), same)
 
 
-def _choose(db: MotionDatabase, tempo_bpm: float, name: str | None, ref: Reference | None):
-    """The style to dance: the best tempo match, on the reference's skeleton and genre when re-creating."""
+def _choose(db: MotionDatabase, music: MusicFeatures, name: str | None, ref: Reference | None) -> StyleFit:
+    """The style and metrical level to dance: the least time warp (``fit_style``), on the reference's
+    skeleton and genre when re-creating."""
     if ref is None:
-        return choose_style(db, tempo_bpm, name)
+        return fit_style(db, music, name)
     same = list(ref.styles)
     if name is None and any(s.genre == ref.genre for s in same):
         same = [s for s in same if s.genre == ref.genre]
-    return choose_style(MotionDatabase({s.name: s for s in same}, db.source), tempo_bpm)
+    return replace(fit_style(MotionDatabase({s.name: s for s in same}, db.source), music), forced=name is not None)
 
 
 def _check_constraints(fixed: dict, bank, style: Style) -> None:
@@ -97,7 +98,8 @@ def choreography_dance(music: MusicFeatures, db: MotionDatabase, config, *, song
     ref = reference_motifs(config.recreate, model, pool) if config.recreate else None
     constraints = [parse_motif_at(c, model.k) if isinstance(c, str)
                    else (float(c[0]), parse_motif_id(str(c[1]), model.k)) for c in config.motif_at]
-    style, subdivide = _choose(db, music.tempo_bpm, config.style, ref)
+    fit = _choose(db, music, config.style, ref)
+    style, subdivide = fit.style, fit.subdivide
     bank = style_bank(style, model)
     timings["graph_s"] = time.perf_counter() - t  # the motif stage takes the graph's place
 
@@ -115,8 +117,10 @@ def choreography_dance(music: MusicFeatures, db: MotionDatabase, config, *, song
     danced = substitute_motifs(bank, model.centroids)[plan]
     result = mix(style, bank, danced, grid.times_s, music.duration_s, fps=config.fps, rng=rng, config=mixer)
     timings["synthesis_s"] = time.perf_counter() - t
-    return _clip(style, music, grid, result, plan, fixed, subdivide, model, song=song, config=config,
+    clip = _clip(style, music, grid, result, plan, fixed, subdivide, model, song=song, config=config,
                  timings=timings, ref=ref)
+    clip.meta["summary"].update(fit_summary(fit, music, clip.meta["warp_rates"]))  # level, warp, warnings
+    return clip
 
 
 def _clip(style, music, grid, result: Mix, plan, fixed, subdivide, model, *, song, config, timings, ref):

@@ -13,6 +13,7 @@ motion turns) falls at phase 0.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -24,7 +25,7 @@ from ...motion.features import foot_contacts, foot_points
 from ...motion.resample import sample_frames
 from ...motion.roles import find_roles
 from ...types import MotionClip, MusicFeatures
-from ..beatgrid import beat_grid, choose_style
+from ..beatgrid import beat_grid, fit_style, fit_summary
 from ..footlock import FootLockState, lock_feet
 from ..stitch import Rendered
 from .data import TRAIN_FPS, beat_features, beat_phase, decode_pose, hamming_weights, music_vectors
@@ -140,7 +141,8 @@ def generate(model: StoredModel, music: MusicFeatures, grid, motifs: np.ndarray,
 def neural_dance(music: MusicFeatures, db: MotionDatabase, config, *, song: str, timings: dict) -> MotionClip:
     """``api.dance`` for ``config.engine == "neural"``: choose style and model, generate, summarise."""
     t = time.perf_counter()
-    style, subdivide = choose_style(db, music.tempo_bpm, config.style or DEFAULT_GENRE)
+    fit = replace(fit_style(db, music, config.style or DEFAULT_GENRE), forced=config.style is not None)
+    style, subdivide = fit.style, fit.subdivide
     model = load_model(find_model(style.genre))
     if model.skeleton.names != style.skeleton.names:
         raise ModelError(f"the neural model {model.path} was trained on another skeleton than style "
@@ -163,4 +165,6 @@ def neural_dance(music: MusicFeatures, db: MotionDatabase, config, *, song: str,
             "realtime_factor": music.duration_s / max(timings["synthesis_s"], 1e-9)},
         "music_beat_times_s": music.beat_times_s, "transition_times_s": np.zeros(0),
         "segment_times_s": np.zeros(0), "style": style.name})
+    # The generator makes its own motion (its warp_rates are per frame): no beat pieces to count.
+    clip.meta["summary"].update(fit_summary(fit, music, None))
     return clip
