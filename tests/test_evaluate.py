@@ -35,7 +35,7 @@ def test_keys_are_the_metrics_in_order_and_json_ready():
 
 
 def test_every_metric_has_display_info():
-    groups = {"general", "beat alignment", "intensity", "smoothness", "contact", "time warp"}
+    groups = {"general", "beat alignment", "bars", "intensity", "smoothness", "contact", "time warp"}
     for key, info in METRICS.items():
         assert info.group in groups and info.label and info.better, key
 
@@ -183,6 +183,9 @@ FROZEN = {
     "ground_penetration_m": 0.0018459044290600924, "ground_penetration_max_m": 0.03431635662595539,
     "warp_median_abs_log2": 0.11874965686332825, "warp_frac_over_10pct": 0.5, "warp_frac_over_25pct": 0.0,
     "warp_rate_min": 0.8, "warp_rate_max": 1.12,
+    "accent_precision": 0.4, "accent_precision_chance": 0.254945054945055,
+    "accent_precision_x_chance": 1.5689655172413792, "accent_recall": 0.4, "accent_recall_chance": 0.254945054945055,
+    "accent_recall_x_chance": 1.5689655172413792,
 }
 
 

@@ -61,7 +61,7 @@ def test_every_music_beat_shows_a_motion_beat_frame(salsa):
     src = np.concatenate([s.source_pos for s in segments])
     jumps = sum(int(s.pieces.jump.sum()) for s in segments)
     assert jumps > 5, "a random walk on this graph jumps often"
-    beat_frames = set(style.beat_frames.tolist())
+    beat_frames = set(graph.render_frame.tolist())  # each beat's visible stop (motion.accents)
     for t in song.beat_times_s:
         f = int(round(t * FPS))
         assert abs(src[f] - round(src[f])) < 1e-6, f"beat at {t:.3f} s shows a fractional source frame"

@@ -37,6 +37,7 @@ DEFAULT_BEAT_WINDOW_S = 0.07    # mir_eval.beat.f_measure's default
 DEFAULT_SKIP_S = 5.0            # mir_eval.beat.trim_beats's default
 
 _NAN = float("nan")
+_GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -202,6 +203,91 @@ def aligned_beat_ratio(music_beats_s, motion_beats_s, *, window_s: float) -> flo
     if motion.size == 0:
         return _NAN
     return float(np.mean(_nearest_distance(motion, music) <= window + TIME_TOL_S))
+
+
+def accent_precision_recall(music_beats_s, motion_beats_s, *, window_s: float = DEFAULT_HIT_WINDOW_S
+                            ) -> tuple[float, float]:
+    """``(precision, recall)`` of a dance's visible accents against the music's beats.
+
+    ``recall = hit_rate`` (music beats with a kinematic beat within +-``window_s``),
+    ``precision = aligned_beat_ratio`` at the same window (kinematic beats within
+    +-``window_s`` of a music beat). Both are needed: recall alone rewards a dance
+    that stops everywhere, precision alone one that stops once.
+    """
+    return (aligned_beat_ratio(music_beats_s, motion_beats_s, window_s=window_s),
+            hit_rate(music_beats_s, motion_beats_s, window_s=window_s))
+
+
+def shifted_chance(music_beats_s, motion_beats_s, *, span_s: tuple[float, float],
+                   window_s: float = DEFAULT_HIT_WINDOW_S, n_shifts: int = 100) -> tuple[float, float]:
+    """``(precision, recall)`` expected by chance: the same kinematic beats, circularly shifted.
+
+    The motion beats are rotated within ``span_s = (start, end)`` by ``n_shifts`` offsets
+    spread over the span (skipping offsets within 2 windows of 0, which are the dance
+    itself) and scored each time; the mean is what the dance's own accent
+    rate and the music's beat rate give with no synchronisation at all. A dance at
+    1.2x this is not synchronised, whatever its bookkeeping says (DESIGN.md).
+    NaN where the unshifted metric is NaN.
+    """
+    music = as_times(music_beats_s, "music_beats_s")
+    motion = as_times(motion_beats_s, "motion_beats_s")
+    window = check_seconds(window_s, "window_s", allow_zero=True)
+    start, end = float(span_s[0]), float(span_s[1])
+    length = end - start
+    if not (math.isfinite(length) and length > 0):
+        raise InputError(f"span_s must be (start, end) seconds with end > start, got {span_s!r}")
+    if music.size == 0 or motion.size == 0:
+        return accent_precision_recall(music, motion, window_s=window)
+    # Golden-ratio offsets cover the span evenly without locking onto a regular beat grid (evenly
+    # spaced ones alias with it).
+    offsets = (np.arange(1, int(n_shifts) + 1) * _GOLDEN % 1.0) * length
+    offsets = offsets[(offsets > 2 * window) & (offsets < length - 2 * window)]
+    scores = np.array([accent_precision_recall(music, np.sort((motion - start + o) % length + start),
+                                               window_s=window) for o in offsets])
+    return float(np.mean(scores[:, 0])), float(np.mean(scores[:, 1]))
+
+
+def bar_accent_share(beat_times_s, beat_in_bar, accent_strength) -> tuple[float, int]:
+    """Share of bars whose strongest visible accent falls on the downbeat, and the bars counted.
+
+    ``beat_in_bar`` (B,) is each beat's position in its bar (0 = downbeat, as
+    ``MusicFeatures.beat_in_bar``); ``accent_strength`` (B,) how strongly the dance
+    marks each beat (``motion_metrics.beat_accent_strength``). Only complete bars with
+    some accent are counted. Chance is ``1 / beats_per_bar``. NaN when no bar counts.
+    """
+    times = as_values(beat_times_s, "beat_times_s")
+    pos = np.asarray(beat_in_bar)
+    strength = as_values(accent_strength, "accent_strength")
+    if not (times.size == pos.size == strength.size):
+        raise InputError(f"beat_times_s ({times.size}), beat_in_bar ({pos.size}) and accent_strength "
+                         f"({strength.size}) need one value per beat")
+    starts = np.flatnonzero(pos == 0)
+    hits, counted = 0, 0
+    for a, b in zip(starts[:-1], starts[1:]):
+        bar = strength[a:b]
+        if b - a != int(pos[b - 1]) + 1 or not np.any(bar > 0):
+            continue  # an incomplete bar (a metre change, a dropped beat) or no accent at all
+        counted += 1
+        hits += int(np.argmax(bar) == 0)
+    return (hits / counted if counted else _NAN), counted
+
+
+def dominant_beat_period(per_beat_values, *, periods=(2, 3, 4)) -> tuple[int | None, dict[int, float]]:
+    """The period (in beats) at which a per-beat series repeats most strongly.
+
+    The normalised autocorrelation of ``per_beat_values`` (e.g. the dance's kinetic
+    energy per beat interval) at each lag in ``periods``; a waltz danced in three
+    shows its peak at 3, an 8-count salsa at 2 or 4. Returns ``(best period, {lag: r})``;
+    ``(None, {})`` for fewer than 3 full periods of values.
+    """
+    x = as_values(per_beat_values, "per_beat_values")
+    lags = [int(p) for p in periods if x.size >= 3 * int(p)]
+    x = x - x.mean()
+    den = float(np.sum(x * x))
+    if not lags or den == 0.0:
+        return None, {}
+    r = {lag: float(np.sum(x[:-lag] * x[lag:]) / den * x.size / (x.size - lag)) for lag in lags}
+    return max(r, key=r.get), r
 
 
 # ---------------------------------------------------------------------------------------------

@@ -12,7 +12,7 @@ from ..types import MusicFeatures
 
 MUSIC_DIR = Path(__file__).resolve().parents[1] / "data" / "music"
 DEFAULT_SONG = "Kevin_MacLeod_-_Vibe_Ace.ogg"  # the README's demo song
-SECTIONS = ("fig4", "scaling", "pipeline", "quality", "beat_tracking", "structure")
+SECTIONS = ("fig4", "scaling", "pipeline", "quality", "beat_tracking", "structure", "accents", "realism")
 
 Progress = Callable[[str], None]
 
@@ -62,6 +62,19 @@ class BenchConfig:
     recreate_style: str = "salsa-120-150bpm"
     recreate_song: str = DEFAULT_SONG
     recreate_clips: int | None = None      # None: every clip of the style in turn
+    # 7. Visible accents on the beats (bench_accents): every mocap engine on bundled and generated songs.
+    accent_songs: tuple[str, ...] | None = None  # bundled songs (None: all)
+    accent_generated: bool = True                # also the generated set (groundtruth_quick / _specs apply)
+    accent_engines: tuple[str, ...] = ("streaming", "signature", "global", "choreography", "random_walk")
+    # 8. Realism (bench_realism): FID_k/FID_g/Div_k/Div_g of every mocap engine against mocap held out of a style.
+    realism_style: str | None = None              # None: the largest style
+    realism_songs: tuple[str, ...] | None = None  # bundled songs (None: every one ...)
+    realism_min_s: float = 20.0                   # ... at least this long
+    realism_max_s: float | None = None
+    realism_seeds: int = 3                        # held-out splits 0..n-1, each also the dances' seed
+    realism_fraction: float = 0.2                 # share of the style's clips held out
+    realism_window_s: float = 5.0
+    realism_engines: tuple[str, ...] = ("streaming", "signature", "global", "choreography", "random_walk")
 
     @classmethod
     def full(cls) -> "BenchConfig":
@@ -73,7 +86,8 @@ class BenchConfig:
         return replace(cls(), segments_s=(2.0, 5.0, 10.0, 30.0), repeats=5, scales=(1, 2), pipeline_runs=1,
                        quality_songs=(DEFAULT_SONG,), quality_max_s=60.0, mocap_max_clips=6,
                        groundtruth_quick=True, structure_songs=(DEFAULT_SONG,), structure_seeds=1, fig12_seeds=2,
-                       fig12_song=DEFAULT_SONG, recreate_clips=4)
+                       fig12_song=DEFAULT_SONG, recreate_clips=4, accent_songs=(DEFAULT_SONG,),
+                       realism_songs=(DEFAULT_SONG,), realism_seeds=1)
 
 
 def load_song(name: str, max_s: float | None = None) -> MusicFeatures:
@@ -92,7 +106,8 @@ def truncate_music(music: MusicFeatures, max_s: float) -> MusicFeatures:
     keep = int(np.searchsorted(music.beat_times_s, max_s, side="right"))
     keep = max(keep, 2)
     return replace(music, duration_s=float(max(max_s, music.beat_times_s[keep - 1])),
-                   beat_times_s=music.beat_times_s[:keep], intensity_db=music.intensity_db[:keep - 1])
+                   beat_times_s=music.beat_times_s[:keep], intensity_db=music.intensity_db[:keep - 1],
+                   beat_in_bar=None if music.beat_in_bar is None else music.beat_in_bar[:keep])
 
 
 def largest_style(db):

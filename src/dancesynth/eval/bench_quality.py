@@ -58,8 +58,7 @@ def walk_dance(style, music: MusicFeatures, *, subdivide: int = 1, seed: int = 0
         "transition_times_s": np.concatenate([s.pieces.t0[s.pieces.jump] for s in segments]),
         "segment_times_s": stats["boundaries_s"],
         "source_frames": np.concatenate([s.source_pos for s in segments]),
-        "warp_rates": np.concatenate([(s.pieces.f1 - s.pieces.f0) / (s.pieces.t1 - s.pieces.t0) / style.fps
-                                      for s in segments]),
+        "warp_rates": np.concatenate([s.warp_rates(style.fps) for s in segments]),
         "style": style.name,
         "summary": {"engine": "random_walk", "seed": seed, "segments": stats["segments"],
                     "restarts": int(sum(np.sum(dead_end[s.path.nodes[:-1]]) for s in segments))},

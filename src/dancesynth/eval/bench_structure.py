@@ -60,8 +60,8 @@ def _chi2_ids(model, template, ids) -> float | None:
     return chi2(template, np.bincount(ids, minlength=model.k)) if ids.size else None
 
 
-def _dances(music, db, seed: int, engines) -> dict:
-    """Each engine's dance of ``music`` in the salsa genre, with the wall time it took."""
+def engine_dances(music, db, seed: int, engines, style: str | None = GENRE) -> dict:
+    """Each engine's dance of ``music`` in ``style`` (None: the product's choice), with the wall time it took."""
     from ..api import dance
     from ..engines.graph.engine import EngineConfig
 
@@ -72,11 +72,11 @@ def _dances(music, db, seed: int, engines) -> dict:
     for name in engines:
         t = time.perf_counter()
         if name == "random_walk":
-            ref = out.get("streaming") or dance(music, database=db, style=GENRE, seed=seed)
+            ref = out.get("streaming") or dance(music, database=db, style=style, seed=seed)
             clip = walk_dance(db.styles[ref.meta["style"]], music, subdivide=ref.meta["summary"]["subdivide"],
                               seed=seed, fps=ref.fps)
         elif name in kinds:
-            clip = dance(music, database=db, style=GENRE, seed=seed, **kinds[name])
+            clip = dance(music, database=db, style=style, seed=seed, **kinds[name])
         else:
             continue
         out[name] = clip
@@ -135,7 +135,7 @@ def structure(cfg: BenchConfig, db, progress: Progress | None = None, out_dir: P
         for seed in range(cfg.structure_seeds):
             if progress:
                 progress(f"structure: {Path(song).name} ({i + 1}/{len(songs)}), seed {seed}")
-            for name, clip in _dances(music, db, seed, engines).items():
+            for name, clip in engine_dances(music, db, seed, engines).items():
                 grid = clip.meta["grid_times_s"]
                 found = found_motifs(clip, model, grid)
                 jumps = np.asarray(clip.meta.get("transition_times_s", np.zeros(0)), dtype=float)
@@ -198,7 +198,7 @@ def fig12(cfg: BenchConfig, db, model, engines, progress, *, out_dir: Path | Non
     for seed in range(cfg.fig12_seeds):
         if progress:
             progress(f"structure: Fig. 12 on {song}, seed {seed}")
-        for name, clip in _dances(music, db, seed, [e for e in engines if e in cfg.fig12_engines]).items():
+        for name, clip in engine_dances(music, db, seed, [e for e in engines if e in cfg.fig12_engines]).items():
             grid = clip.meta["grid_times_s"]
             found = found_motifs(clip, model, grid)
             starts = grid[:len(found)]

@@ -65,6 +65,23 @@ METRICS: dict[str, MetricInfo] = {
     "kinematic_beat_ratio": _m("kinematic / music beats (Aristidou 5.4.1a)", "", "≈mocap", "beat alignment"),
     "aligned_beat_ratio": _m("kinematic beats within 1 frame of a music beat (5.4.1b)", "", "higher",
                              "beat alignment"),
+    "accent_precision": _m("kinematic beats within the hit window of a music beat (precision)", "", "higher",
+                           "beat alignment"),
+    "accent_precision_chance": _m("... by chance (kinematic beats circularly shifted)", "", "info", "beat alignment"),
+    "accent_precision_x_chance": _m("precision / chance", "", "higher", "beat alignment"),
+    "accent_recall": _m("music beats with a kinematic beat within the hit window (recall)", "", "higher",
+                        "beat alignment"),
+    "accent_recall_chance": _m("... by chance (kinematic beats circularly shifted)", "", "info", "beat alignment"),
+    "accent_recall_x_chance": _m("recall / chance", "", "higher", "beat alignment"),
+    "beats_per_bar": _m("music beats per bar", "", "info", "bars"),
+    "downbeat_precision": _m("kinematic beats on a downbeat (precision)", "", "higher", "bars"),
+    "downbeat_precision_chance": _m("... by chance", "", "info", "bars"),
+    "downbeat_recall": _m("downbeats with a kinematic beat (recall)", "", "higher", "bars"),
+    "downbeat_recall_chance": _m("... by chance", "", "info", "bars"),
+    "bar_accent_on_downbeat": _m("bars whose strongest accent is on the downbeat", "", "higher", "bars"),
+    "bar_accent_chance": _m("... by chance (1 / beats per bar)", "", "info", "bars"),
+    "n_bars_counted": _m("bars with an accent (counted above)", "", "info", "bars"),
+    "energy_period_beats": _m("strongest period of per-beat kinetic energy (2-4 beats)", "beats", "info", "bars"),
     "intensity_spearman": _m("Spearman(loudness, kinetic energy) per beat interval", "", "higher", "intensity"),
     "n_transitions": _m("transitions", "", "info", "smoothness"),
     "max_transition_jump_deg_s": _m("largest angular-velocity jump at a transition", "deg/s", "lower",
@@ -90,7 +107,8 @@ METRICS: dict[str, MetricInfo] = {
 }
 
 
-def evaluate(motion: MotionClip, *, music_beats_s=None, music_loudness_db=None, transitions_s=None,
+def evaluate(motion: MotionClip, *, music_beats_s=None, music_loudness_db=None, beat_in_bar=None,
+             beats_per_bar: int | None = None, transitions_s=None,
              warp_rates=None, mocap: Sequence[MotionClip] | MocapReference | None = None,
              params: EvalParams = EvalParams()) -> dict[str, float | int | None]:
     """Every applicable metric of ``motion``; the keys of ``METRICS``, ``None`` where not applicable.
@@ -123,12 +141,14 @@ def evaluate(motion: MotionClip, *, music_beats_s=None, music_loudness_db=None, 
     out["duration_s"] = motion.duration_s
     out["n_frames"] = motion.n_frames
 
-    kin_s, _, _ = mm.kinematic_beats(motion, smooth_s=p.beat_smooth_s, polyorder=p.beat_polyorder,
+    kin_s, _, smooth = mm.kinematic_beats(motion, smooth_s=p.beat_smooth_s, polyorder=p.beat_polyorder,
                                      min_separation_s=p.beat_min_separation_s,
                                      min_prominence_frac=p.beat_min_prominence_frac, global_pos=g_pos)
     out["n_kinematic_beats"] = int(kin_s.size)
     if music_beats_s is not None:
         out.update(_music_metrics(motion, kin_s, music_beats_s, music_loudness_db, g_pos, p))
+        if beat_in_bar is not None:
+            out.update(_bar_metrics(motion, kin_s, smooth, music_beats_s, beat_in_bar, beats_per_bar, g_pos, p))
     elif music_loudness_db is not None:
         raise InputError("music_loudness_db needs music_beats_s: it holds one value per interval between beats")
 
@@ -191,6 +211,12 @@ def _music_metrics(motion, kin_s, music_beats_s, music_loudness_db, g_pos, p: Ev
         "kinematic_beat_ratio": bm.beat_count_ratio(music, kin_s),
         "aligned_beat_ratio": bm.aligned_beat_ratio(music, kin_s, window_s=aligned_window),
     }
+    span = (0.0, motion.duration_s)
+    precision, recall = bm.accent_precision_recall(music, kin_s, window_s=p.hit_window_s)
+    chance_p, chance_r = bm.shifted_chance(music, kin_s, span_s=span, window_s=p.hit_window_s)
+    out.update(accent_precision=precision, accent_precision_chance=chance_p,
+               accent_precision_x_chance=_ratio(precision, chance_p), accent_recall=recall,
+               accent_recall_chance=chance_r, accent_recall_x_chance=_ratio(recall, chance_r))
     if music_loudness_db is not None:
         loud = bm.as_values(music_loudness_db, "music_loudness_db", allow_inf=True)
         if loud.size != max(beats.size - 1, 0):
@@ -201,6 +227,29 @@ def _music_metrics(motion, kin_s, music_beats_s, music_loudness_db, g_pos, p: Ev
         inside = np.isfinite(energy)
         out["intensity_spearman"] = bm.intensity_correlation(loud[inside], energy[inside])
     return out
+
+
+def _bar_metrics(motion, kin_s, smooth, music_beats_s, beat_in_bar, beats_per_bar, g_pos, p: EvalParams) -> dict:
+    beats = bm.as_values(music_beats_s, "music_beats_s")
+    pos = np.asarray(beat_in_bar)
+    if pos.shape != beats.shape or not beats_per_bar or np.any(pos < 0) or np.any(pos >= beats_per_bar):
+        raise InputError(f"beat_in_bar needs one position in [0, beats_per_bar) per music beat ({beats.size}); "
+                         "pass MusicFeatures.beat_in_bar and .beats_per_bar")
+    frame = 1.0 / motion.fps
+    inside = (beats >= -frame) & (beats <= motion.duration_s + frame)
+    beats, pos = beats[inside], pos[inside]
+    downbeats = beats[pos == 0]
+    precision, recall = bm.accent_precision_recall(downbeats, kin_s, window_s=p.hit_window_s)
+    chance_p, chance_r = bm.shifted_chance(downbeats, kin_s, span_s=(0.0, motion.duration_s),
+                                           window_s=p.hit_window_s)
+    strength = mm.beat_accent_strength(beats, kin_s, smooth, motion.fps, window_s=p.hit_window_s)
+    share, counted = bm.bar_accent_share(beats, pos, strength)
+    energy = mm.beat_interval_energy(motion, beats, global_pos=g_pos)
+    period, _ = bm.dominant_beat_period(energy[np.isfinite(energy)])
+    return {"beats_per_bar": int(beats_per_bar), "downbeat_precision": precision,
+            "downbeat_precision_chance": chance_p, "downbeat_recall": recall, "downbeat_recall_chance": chance_r,
+            "bar_accent_on_downbeat": share, "bar_accent_chance": 1.0 / beats_per_bar, "n_bars_counted": counted,
+            "energy_period_beats": period}
 
 
 @dataclass(frozen=True, eq=False)

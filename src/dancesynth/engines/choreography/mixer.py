@@ -22,6 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from ... import rotations as rot
 from ...kinematics import fk
+from ...motion.accents import AccentCosts, cached_accent_beats
 from ...motion.database import Style
 from ...motion.motifs import style_motifs
 from ...motion.roles import find_roles
@@ -39,6 +40,8 @@ class MixerConfig:
     foot_lock: bool = True
     unlock_s: float = 0.15         # a foot moved by a stitch is free this long (see ``_released``)
     unlock_tol_m: float = 0.05
+    accent_window: float = 0.35    # show each word's beats at their visible stops (motion.accents; 0 = off)
+    accent: AccentCosts | None = AccentCosts()  # prefer words that stop on their beats and not between
 
 
 @dataclass(frozen=True)
@@ -108,7 +111,7 @@ def _match(bank: WordBank, prev: np.ndarray, cand: np.ndarray, config: "MixerCon
 
 
 def choose_words(bank: WordBank, motifs: np.ndarray, durations_s: np.ndarray, rng: np.random.Generator,
-                 config: MixerConfig = MixerConfig()) -> np.ndarray:
+                 config: MixerConfig = MixerConfig(), word_cost: np.ndarray | None = None) -> np.ndarray:
     """The word (index into ``bank``) danced on each beat interval, one of that beat's motif.
 
     The paper picks, beat by beat, the word whose first poses best continue the previous
@@ -116,12 +119,14 @@ def choose_words(bank: WordBank, motifs: np.ndarray, durations_s: np.ndarray, rn
     each beat's candidates), so a choice that leaves the next beat only bad
     continuations is avoided, and runs of words that follow each other in the mocap
     are found wherever the plan allows them. A word's length far from its beat's costs
-    ``tempo_weight`` per (log2 time-warp rate)^2; the seed breaks ties at the start.
+    ``tempo_weight`` per (log2 time-warp rate)^2, and ``word_cost`` (W,), if given, is
+    added per word; the seed breaks ties at the start.
     """
     members = {int(m): np.flatnonzero(bank.motif == m) for m in np.unique(motifs)}
     log_len = np.log2(bank.duration_s(np.arange(len(bank))))
     cands = [members[int(m)] for m in motifs]
-    unary = [config.tempo_weight * (log_len[c] - np.log2(d)) ** 2 for c, d in zip(cands, durations_s)]
+    extra = np.zeros(len(bank)) if word_cost is None else word_cost
+    unary = [config.tempo_weight * (log_len[c] - np.log2(d)) ** 2 + extra[c] for c, d in zip(cands, durations_s)]
     total = unary[0] + 1e-3 * rng.random(len(cands[0]))  # where the dance starts is the seed's choice
     back = []
     for i in range(1, len(motifs)):
@@ -174,10 +179,20 @@ def mix(style: Style, bank: WordBank, motifs: np.ndarray, beat_times_s: np.ndarr
         fps: float, rng: np.random.Generator, config: MixerConfig = MixerConfig()) -> Mix:
     """Dance ``motifs[i]`` on beat interval ``beat_times_s[i] → [i+1]``, rendered up to ``end_s``."""
     times = np.asarray(beat_times_s, dtype=np.float64)
-    chosen = choose_words(bank, np.asarray(motifs), np.diff(times), rng, config)
-    f0 = bank.words.start[chosen].astype(np.float64)
-    f1 = bank.words.end[chosen].astype(np.float64)
-    jump = np.r_[False, bank.words.start[chosen[1:]] != bank.words.end[chosen[:-1]]]
+    accents = cached_accent_beats(style, window=config.accent_window) if config.accent_window > 0 else None
+    word_cost = None
+    if accents is not None and config.accent:
+        arrive, played = config.accent.beat_costs(accents.strength, accents.offbeat)
+        start = np.searchsorted(style.beat_frames, bank.words.start)
+        end = np.searchsorted(style.beat_frames, bank.words.end)
+        word_cost = arrive[end] + played[start]
+    chosen = choose_words(bank, np.asarray(motifs), np.diff(times), rng, config, word_cost)
+    f0, f1 = bank.words.start[chosen], bank.words.end[chosen]
+    jump = np.r_[False, f0[1:] != f1[:-1]]
+    if accents is not None:
+        # Words start and end on motion beats; the stop a viewer sees may sit a little off them.
+        f0, f1 = (accents.frame[np.searchsorted(style.beat_frames, f)] for f in (f0, f1))
+    f0, f1 = f0.astype(np.float64), f1.astype(np.float64)
     pieces = Pieces(times[:-1], times[1:], f0, f1, jump)
     _, frames = render(style, pieces, StitchState(), fps=fps, end_s=end_s, blend_s=config.blend_s,
                        inclusive_end=True)

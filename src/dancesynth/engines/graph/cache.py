@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ...io.files import atomic_output
+from ...motion import accents
 from ...motion.database import Style, cache_dir
 from . import meta_graph
 from .meta_graph import GRAPH_FORMAT_VERSION, GraphConfig, MetaMotionGraph, build_graph
@@ -22,8 +23,10 @@ from .meta_graph import GRAPH_FORMAT_VERSION, GraphConfig, MetaMotionGraph, buil
 _SCALARS = ("style", "fps", "thr", "n_forced", "n_trapped")
 
 
-# The code that builds graphs is part of the key: editing it can never serve a stale graph.
-_BUILDER = hashlib.blake2b(Path(meta_graph.__file__).read_bytes(), digest_size=8).hexdigest()
+# The code that builds graphs (and finds the accents they render) is part of the key:
+# editing it can never serve a stale graph.
+_BUILDER = hashlib.blake2b(Path(meta_graph.__file__).read_bytes() + Path(accents.__file__).read_bytes(),
+                           digest_size=8).hexdigest()
 
 
 def graph_path(style: Style, config: GraphConfig, root: Path | None = None) -> Path:

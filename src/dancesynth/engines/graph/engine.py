@@ -27,7 +27,7 @@ from ...motion.roles import find_roles
 from ..footlock import FootLockState, lock_feet
 from ..stitch import Pieces, Rendered, StitchState, render
 from .meta_graph import MetaMotionGraph
-from .search import Path, search
+from .search import AccentCosts, Path, search
 from .signature import DEFAULT_WEIGHT, SignatureTarget
 
 
@@ -37,13 +37,20 @@ class MusicSegment:
     segment's last beat -- and their intensities (K,) in dB.
 
     ``remaining_beats`` is how many beats follow this segment, when known (THC);
-    ``end_s`` marks the last segment and says up to when to render.
+    ``end_s`` marks the last segment and says up to when to render. ``bar_position``
+    (K+1,), when the metre is known, is the position of each beat in its bar (0 = the
+    downbeat, -1 = unknown) and ``beats_per_bar`` the bar's length. ``music_beat``
+    (K+1,) says which beats are the music's (False: a subdivision, when a slow song is
+    danced at double time).
     """
 
     beat_times_s: np.ndarray
     intensity_db: np.ndarray
     remaining_beats: int | None = None
     end_s: float | None = None
+    bar_position: np.ndarray | None = None
+    beats_per_bar: int | None = None
+    music_beat: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -54,11 +61,15 @@ class EngineConfig:
     foot_lock: bool = True            # hold planted feet still through blends (leg IK)
     jump_cost: float = 0.25           # added to every jump (0 = paper): fewer, better-motivated jumps
     signature_weight: float = DEFAULT_WEIGHT  # cost scale of a motif not owed, when following a signature
+    accent: AccentCosts | None = AccentCosts()  # prefer pieces that stop on their beats (None = paper)
+    bar_accent: float = 0.5           # ask for this much more intensity (z units) on each bar's first beat,
+                                      # less on the others: the big moves start on the "1" (0 = paper)
+    downbeat_stop: float = 0.5        # on a bar's first beat, a stop of strength s costs s x this less
 
     @classmethod
     def paper(cls) -> "EngineConfig":
-        """The objective of eq. (4)-(9) alone: no repeat penalty, no jump cost."""
-        return cls(repeat_penalty=0.0, jump_cost=0.0)
+        """The objective of eq. (4)-(9) alone: no repeat penalty, no jump cost, no accent costs."""
+        return cls(repeat_penalty=0.0, jump_cost=0.0, accent=None, bar_accent=0.0, downbeat_stop=0.0)
 
 
 @dataclass(frozen=True)
@@ -97,14 +108,31 @@ class SegmentFrames:
         return cls(local_rot, frames.root_pos, frames.contacts, frames.source_pos, path, pieces, search_s, render_s,
                    motifs)
 
+    def warp_rates(self, source_fps: float) -> np.ndarray:
+        """Playback rate of each beat piece (source seconds per music second)."""
+        return (self.pieces.f1 - self.pieces.f0) / (self.pieces.t1 - self.pieces.t0) / source_fps
+
+
+def bar_shape(bar_position: np.ndarray | None, beats_per_bar: int | None, amount: float) -> np.ndarray | float:
+    """What the metre adds to the standardised music intensity of each beat interval.
+
+    ``+amount`` on a bar's first beat and ``-amount / (beats_per_bar - 1)`` on its others,
+    so a bar keeps its mean: the intensity match then starts the big moves on the "1"
+    and the dance's energy repeats with the bar (three beats in a waltz).
+    """
+    if bar_position is None or not beats_per_bar or beats_per_bar < 2 or amount == 0:
+        return 0.0
+    pos = np.asarray(bar_position)
+    return np.where(pos == 0, amount, np.where(pos > 0, -amount / (beats_per_bar - 1), 0.0))
+
 
 def standardise(values: np.ndarray, mean: float, std: float) -> np.ndarray:
     return (values - mean) / std if std > 1e-9 else np.zeros_like(values)
 
 
 def pieces_from_path(graph: MetaMotionGraph, path: Path, beat_times_s: np.ndarray) -> Pieces:
-    f0 = graph.node_frame[path.via].astype(np.float64)
-    f1 = graph.node_frame[path.nodes[1:]].astype(np.float64)
+    f0 = graph.render_frame[path.via].astype(np.float64)
+    f1 = graph.render_frame[path.nodes[1:]].astype(np.float64)
     return Pieces(beat_times_s[:-1].astype(float), beat_times_s[1:].astype(float), f0, f1, path.jump.copy())
 
 
@@ -152,9 +180,13 @@ class GraphEngine:
             if owed is not None:
                 penalty = owed if penalty is None else penalty + owed
         t0 = time.perf_counter()
-        path = search(self.graph, standardise(inten, mean, std), np.diff(beats), start_nodes=start,
+        bars = segment.bar_position
+        target = standardise(inten, mean, std) + bar_shape(None if bars is None else bars[:-1],
+                                                            segment.beats_per_bar, self.config.bar_accent)
+        path = search(self.graph, target, np.diff(beats), start_nodes=start,
                       prev_duration_s=state.prev_duration_s, thc=thc, node_penalty=penalty,
-                      jump_cost=self.config.jump_cost)
+                      jump_cost=self.config.jump_cost, accent=self.config.accent,
+                      **self._beat_costs(bars, segment.music_beat))
         decay = 0.5 ** (1.0 / self.config.repeat_half_life_beats)
         recent = recent * decay ** len(inten)
         np.add.at(recent, path.nodes[1:], decay ** np.arange(len(inten) - 1, -1, -1))
@@ -173,21 +205,44 @@ class GraphEngine:
                                            self.signature)
 
     def run_global(self, beat_times_s: np.ndarray, intensity_db: np.ndarray, end_s: float,
-                   seed: int | None = None) -> SegmentFrames:
-        """The global-DP baseline: one search over the whole song, then one render."""
+                   seed: int | None = None, bar_position: np.ndarray | None = None,
+                   beats_per_bar: int | None = None, music_beat: np.ndarray | None = None) -> SegmentFrames:
+        """The global-DP baseline: one search over the whole song, then one render.
+
+        ``bar_position``, ``beats_per_bar`` and ``music_beat`` as in ``MusicSegment``."""
         inten = np.asarray(intensity_db, dtype=np.float64)
         state = self.initial_state(seed, needed_beats=len(inten))
         t0 = time.perf_counter()
         # The same objective as streaming (jump cost included) but over the whole song;
         # the repeat penalty is a streaming memory and has no place in one global DP.
-        path = search(self.graph, standardise(inten, inten.mean(), inten.std()), np.diff(beat_times_s),
-                      start_nodes=state.start_nodes, thc=0.0, jump_cost=self.config.jump_cost)
+        target = standardise(inten, inten.mean(), inten.std()) + bar_shape(
+            None if bar_position is None else bar_position[:-1], beats_per_bar, self.config.bar_accent)
+        path = search(self.graph, target, np.diff(beat_times_s),
+                      start_nodes=state.start_nodes, thc=0.0, jump_cost=self.config.jump_cost,
+                      accent=self.config.accent, **self._beat_costs(bar_position, music_beat))
         t1 = time.perf_counter()
         pieces = pieces_from_path(self.graph, path, np.asarray(beat_times_s, dtype=np.float64))
         _, frames = render(self.style, pieces, state.stitch, fps=self.fps,
                            end_s=end_s, blend_s=self.config.blend_s, inclusive_end=True)
         local, _ = self._lock_feet(frames, state.feet)
         return SegmentFrames.of(frames, local, path, pieces, t1 - t0, time.perf_counter() - t1, self.signature)
+
+    def _beat_costs(self, bar_position: np.ndarray | None, music_beat: np.ndarray | None) -> dict:
+        """``search``'s per-beat costs: a clear stop is worth more on a bar's first beat, and
+        costs what an off-beat stop does on a grid beat that is no music beat."""
+        strength = self.graph.node_accent
+        if strength is None or self.config.accent is None or (bar_position is None and music_beat is None):
+            return {}
+        n = len(bar_position if bar_position is not None else music_beat)
+        cls = np.full(n, -1)
+        if bar_position is not None:
+            cls[np.asarray(bar_position) == 0] = 0
+        if music_beat is not None:
+            cls[~np.asarray(music_beat, dtype=bool)] = 1
+        cls[0] = -1  # the segment's first node was chosen by the previous segment
+        costs = np.stack([-self.config.downbeat_stop * np.minimum(strength, 3.0),
+                          self.config.accent.beat_costs(strength, strength)[1]])
+        return {"beat_class": cls, "class_cost": costs}
 
     def _lock_feet(self, frames: Rendered, feet: FootLockState):
         if not self.config.foot_lock:

@@ -26,6 +26,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from ... import rotations as rot
+from ...motion.accents import cached_accent_beats
 from ...motion.database import Style
 
 GRAPH_FORMAT_VERSION = 1
@@ -49,11 +50,14 @@ class GraphConfig:
                                            # hold capture glitches (wrist flips) and are not played
     prune_trap_cycles: bool = True  # drop steps into small cycles the main cycle cannot be reached
                                     # from (a dance that enters one loops there forever; see derive_steps)
+    accent_window: float = 0.35     # render each beat at its most visible stop within this fraction of a
+                                    # beat (motion.accents; 0 = the motion beats themselves, the paper)
 
     @classmethod
     def paper(cls) -> "GraphConfig":
         """Eq. (1)-(3) as printed: literal neighbouring frames, no limits on jumps."""
-        return cls(neighbour_s=0.0, max_jumps_per_beat=0, min_jump_beats=0, prune_trap_cycles=False)
+        return cls(neighbour_s=0.0, max_jumps_per_beat=0, min_jump_beats=0, prune_trap_cycles=False,
+                   accent_window=0.0)
 
     def __post_init__(self):
         if not self.thr > 1.0:
@@ -94,6 +98,12 @@ class MetaMotionGraph:
     step_rho: np.ndarray = None    # frames(prev(src)->src) / frames(via->dst); nan if src starts a clip
     group_starts: np.ndarray = None  # start of each destination's run of steps
     group_nodes: np.ndarray = None   # destination node of each run
+    # Visible accents (motion.accents): the frame each beat is rendered at, how clearly the
+    # motion stops there (1 = the style's median stop, 0 = none), and how much it stops between
+    # the node and its successor. None in hand-made graphs: render node_frame, no accent costs.
+    node_accent_frame: np.ndarray = None
+    node_accent: np.ndarray = None
+    edge_offbeat: np.ndarray = None
 
     @property
     def n_nodes(self) -> int:
@@ -109,11 +119,17 @@ class MetaMotionGraph:
         """D of the paper: mean number of steps entering a node."""
         return len(self.step_dst) / max(self.n_nodes, 1)
 
+    @property
+    def render_frame(self) -> np.ndarray:
+        """(N,) the source frame shown on the music beat: the beat's visible stop."""
+        return self.node_frame if self.node_accent_frame is None else self.node_accent_frame
+
     def frames_to_next(self) -> np.ndarray:
+        """(N,) source frames the mono edge leaving each node plays (0 at a clip's last beat)."""
         nxt = self.next_node
         out = np.zeros(self.n_nodes)
         ok = nxt >= 0
-        out[ok] = self.node_frame[nxt[ok]] - self.node_frame[ok]
+        out[ok] = self.render_frame[nxt[ok]] - self.render_frame[ok]
         return out
 
     def arrays(self) -> dict:
@@ -223,11 +239,13 @@ def build_graph(style: Style, config: GraphConfig = GraphConfig()) -> MetaMotion
     prev_node = np.full(n, -1)
     prev_node[next_node[next_node >= 0]] = np.flatnonzero(next_node >= 0)
 
-    # Mono-directional edges: total kinetic energy between successive beats (J*s).
+    # Mono-directional edges: total kinetic energy between successive beats (J*s), as rendered:
+    # from one visible stop to the next.
+    accents = cached_accent_beats(style, window=config.accent_window)
     cum = np.concatenate([[0.0], np.cumsum(style.energy, dtype=np.float64)])
     w1 = np.full(n, np.nan)
     has = next_node >= 0
-    w1[has] = (cum[frames[next_node[has]]] - cum[frames[has]]) / style.fps
+    w1[has] = (cum[accents.frame[next_node[has]]] - cum[accents.frame[has]]) / style.fps
     w1_z = np.zeros(n)
     if has.sum() > 1 and np.std(w1[has]) > 0:
         w1_z[has] = (w1[has] - w1[has].mean()) / w1[has].std()
@@ -260,6 +278,7 @@ def build_graph(style: Style, config: GraphConfig = GraphConfig()) -> MetaMotion
         style=style.name, fps=style.fps, node_frame=frames, node_clip=clip, next_node=next_node,
         prev_node=prev_node, w1=w1, w1_z=w1_z, bi_src=src, bi_dst=dst, bi_rd=rd_e.astype(np.float64),
         capacity=np.zeros(n), init_nodes=np.flatnonzero(np.r_[True, clip[1:] != clip[:-1]]), thr=config.thr)
+    graph.node_accent_frame, graph.node_accent, graph.edge_offbeat = accents.frame, accents.strength, accents.offbeat
     derive_steps(graph, config.prune_trap_cycles)
 
     if config.close_dead_ends and not np.isinf(graph.capacity[graph.init_nodes]).any():

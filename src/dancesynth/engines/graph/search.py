@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...errors import SynthesisError
+from ...motion.accents import AccentCosts
 from .meta_graph import MetaMotionGraph
 
 
@@ -54,7 +55,9 @@ def _rate_factor(rho: np.ndarray, prev_duration: float | None, duration: float) 
 
 def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndarray, *,
            start_nodes: np.ndarray, prev_duration_s: float | None = None, thc: float = np.inf,
-           node_penalty: np.ndarray | None = None, jump_cost: float = 0.0) -> Path:
+           node_penalty: np.ndarray | None = None, jump_cost: float = 0.0,
+           accent: AccentCosts | None = None, beat_class: np.ndarray | None = None,
+           class_cost: np.ndarray | None = None) -> Path:
     """Best path for K beat intervals (eq. 7-9).
 
     ``intensity_z`` (K,) are the normalised music intensities, ``durations_s`` (K,)
@@ -63,14 +66,16 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     ``node_penalty`` (N,), if given, is added whenever a step arrives at a node (the
     streaming engine uses it to discourage replaying recent beats; not in the paper).
     ``jump_cost`` is added to every jump (0 in the paper, where a jump to a beat of
-    exactly the music's intensity is free).
+    exactly the music's intensity is free). ``accent`` adds the costs of ``AccentCosts``
+    where the graph knows its accents. ``class_cost`` (C, N) is added on arriving at a node
+    on beat ``k`` (0..K) of class ``beat_class[k]`` (-1: none), e.g. the downbeats.
     """
     intensity_z = np.asarray(intensity_z, dtype=np.float64)
     durations_s = np.asarray(durations_s, dtype=np.float64)
     n, k_steps = graph.n_nodes, len(intensity_z)
     costs = np.full((k_steps + 1, n), np.inf)
     costs[0, np.asarray(start_nodes)] = 0.0
-    steps = _Steps(graph, node_penalty, jump_cost)
+    steps = _Steps(graph, node_penalty, jump_cost, accent)
     prev = np.r_[np.nan if prev_duration_s is None else prev_duration_s, durations_s[:-1]]
 
     for k in range(k_steps):
@@ -78,10 +83,12 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
         # jumps are sorted by destination, so a reduceat takes each destination's best.
         dev = np.abs(graph.w1_z - intensity_z[k])
         row = costs[k + 1]
-        row[steps.m_dst] = steps.mono(costs[k], dev)
+        row[steps.m_dst] = steps.mono(costs[k], dev, durations_s[k])
         if steps.j_nodes.size:
             best = np.minimum.reduceat(steps.jump(costs[k], dev, prev[k], durations_s[k]), steps.j_starts)
             row[steps.j_nodes] = np.minimum(row[steps.j_nodes], best)
+        if beat_class is not None and beat_class[k + 1] >= 0:
+            row += class_cost[beat_class[k + 1]]  # the same for every way in: backtracking is unaffected
 
     ok = (graph.capacity >= thc) & np.isfinite(costs[k_steps])
     if not ok.any():
@@ -99,7 +106,8 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
         v = nodes[k + 1]
         m_sel = steps.mono_into[v:v + 1] if steps.mono_into[v] >= 0 else np.zeros(0, dtype=np.int64)
         j_sel = np.arange(steps.j_first[v], steps.j_last[v])
-        cand = np.r_[steps.mono(costs[k], dev, m_sel), steps.jump(costs[k], dev, prev[k], durations_s[k], j_sel)]
+        cand = np.r_[steps.mono(costs[k], dev, durations_s[k], m_sel),
+                     steps.jump(costs[k], dev, prev[k], durations_s[k], j_sel)]
         i = int(np.argmin(cand))
         if i < len(m_sel):
             nodes[k] = vias[k] = steps.m_src[m_sel[i]]
@@ -117,16 +125,23 @@ class _Steps:
     step chosen when backtracking reproduces the forward minimum exactly.
     """
 
-    def __init__(self, graph: MetaMotionGraph, node_penalty, jump_cost: float):
+    def __init__(self, graph: MetaMotionGraph, node_penalty, jump_cost: float, accent: AccentCosts | None = None):
         jump = graph.step_jump
         m, j = np.flatnonzero(~jump), np.flatnonzero(jump)
         arrive = (np.zeros(graph.n_nodes) if node_penalty is None
                   else np.asarray(node_penalty, dtype=np.float64))
+        played = np.zeros(graph.n_nodes)  # cost of playing the mono edge leaving a node
+        self.warp = None
+        if accent is not None and graph.node_accent is not None:
+            arrive_cost, played = accent.beat_costs(graph.node_accent, graph.edge_offbeat)
+            arrive = arrive + arrive_cost
+            self.warp, self.free_warp = accent.warp, accent.free_warp
+            self.log_s = np.log(np.maximum(graph.frames_to_next(), 1.0) / graph.fps)  # seconds each edge plays
         self.m_src, self.m_dst = graph.step_src[m], graph.step_dst[m]
-        self.m_add = arrive[self.m_dst]
+        self.m_add = arrive[self.m_dst] + played[self.m_src]
         self.j_src, self.j_via, self.j_dst = graph.step_src[j], graph.step_via[j], graph.step_dst[j]
         self.j_rho, self.j_w2 = graph.step_rho[j], graph.step_w2[j]
-        self.j_add = jump_cost + arrive[self.j_dst]
+        self.j_add = jump_cost + arrive[self.j_dst] + played[self.j_via]
         first = np.r_[True, self.j_dst[1:] != self.j_dst[:-1]] if j.size else np.zeros(0, bool)
         self.j_starts = np.flatnonzero(first)
         self.j_nodes = self.j_dst[self.j_starts]
@@ -138,15 +153,22 @@ class _Steps:
         self.j_first[self.j_nodes] = self.j_starts
         self.j_last[self.j_nodes] = np.r_[self.j_starts[1:], len(self.j_dst)]
 
-    def mono(self, prev_cost, dev, sel=slice(None)):
+    def _warp(self, edge_nodes, duration):
+        if self.warp is None:
+            return 0.0
+        over = np.abs(self.log_s[edge_nodes] - np.log(duration)) - self.free_warp
+        return self.warp * np.maximum(over, 0.0)
+
+    def mono(self, prev_cost, dev, duration, sel=slice(None)):
         """Cost of arriving by mono steps ``sel``: eq. (4), first case."""
         src = self.m_src[sel]
-        return prev_cost[src] + (dev[src] + self.m_add[sel])
+        return prev_cost[src] + (dev[src] + self.m_add[sel] + self._warp(src, duration))
 
     def jump(self, prev_cost, dev, prev_duration, duration, sel=slice(None)):
         """Cost of arriving by jumps ``sel`` and their mono edge: eq. (4), second case."""
         factor = _rate_factor(self.j_rho[sel], prev_duration, duration) * self.j_w2[sel]
-        return prev_cost[self.j_src[sel]] + (dev[self.j_via[sel]] * factor + self.j_add[sel])
+        via = self.j_via[sel]
+        return prev_cost[self.j_src[sel]] + (dev[via] * factor + self.j_add[sel] + self._warp(via, duration))
 
 
 def path_cost(graph: MetaMotionGraph, path: Path, intensity_z, durations_s, prev_duration_s=None) -> float:

@@ -34,7 +34,8 @@ from ...motion.database import Style
 from ...motion.motifs import MotifModel, style_motifs
 from .meta_graph import MetaMotionGraph
 
-DEFAULT_WEIGHT = 0.5  # on the scale of the DP's z-scored intensity deviations (a jump costs 0.25)
+DEFAULT_WEIGHT = 1.0  # on the scale of the DP's z-scored intensity deviations (a jump costs 0.25); 0.5 until
+                      # the accent costs (motion.accents) joined the DP and diluted it
 _EPS = 1e-3          # keeps the ratio finite for motifs neither danced nor in the template
 
 

@@ -1,0 +1,178 @@
+"""Are the dance's visible accents on the beats? Every mocap engine, beside chance, a random walk and the mocap.
+
+For each song -- the bundled music (its tracked beats and metre are the reference)
+and the generated songs with exactly known beats and bars (``groundtruth``; the
+dance is made from the audio, as a user's would be, and scored against the truth) --
+each engine dances with the product defaults, and ``evaluate`` scores it:
+
+- precision and recall of its kinematic beats (speed minima) against the beats at
+  +-50 ms, each beside its chance level (the same kinematic beats circularly shifted)
+  and the ratio to it; the same against downbeats; the share of bars whose strongest
+  accent is on the downbeat (4/4 songs; chance 1/4); on 3/4 songs, the period
+  (2, 3 or 4 beats) at which the per-beat kinetic energy repeats most;
+- the guards: playback rates within [0.8, 1.25], intensity Spearman, transition
+  jumps and foot skating beside the style's mocap, one-frame joint steps.
+
+The raw mocap row scores each clip of the styles danced against its own motion
+beats (it has no music). Means over songs per engine; per song in the JSON.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .bench_common import MUSIC_DIR, BenchConfig, Progress, load_song, table
+from .bench_quality import at_fps, mean_scores, mocap_scores
+
+ENGINES = ("streaming", "signature", "global", "choreography", "random_walk")
+TITLES = {"streaming": "streaming", "signature": "+signature", "global": "global DP",
+          "choreography": "choreography", "random_walk": "random walk", "mocap": "mocap*"}
+KEYS = ("accent_precision", "accent_precision_chance", "accent_precision_x_chance", "accent_recall",
+        "accent_recall_chance", "accent_recall_x_chance", "downbeat_recall", "downbeat_recall_chance",
+        "bar_accent_on_downbeat", "bar_accent_chance", "warp_in_range", "intensity_spearman",
+        "transition_jump_vs_mocap_p99", "jump_p99_vs_mocap", "foot_skate_m_s", "pfc", "one_frame_steps")
+LABELS = {"accent_precision": "precision: kinematic beats on a beat (±50 ms)",
+          "accent_precision_chance": "  chance (circular shift)", "accent_precision_x_chance": "  × chance",
+          "accent_recall": "recall: beats with a kinematic beat (±50 ms)",
+          "accent_recall_chance": "  chance (circular shift)", "accent_recall_x_chance": "  × chance",
+          "downbeat_recall": "downbeats with a kinematic beat", "downbeat_recall_chance": "  chance",
+          "bar_accent_on_downbeat": "bars with the strongest accent on the 1 (4/4)",
+          "bar_accent_chance": "  chance (1 / beats per bar)",
+          "warp_in_range": "beat pieces played at rate 0.8-1.25",
+          "intensity_spearman": "Spearman(loudness, kinetic energy)",
+          "transition_jump_vs_mocap_p99": "largest transition jump / mocap p99",
+          "jump_p99_vs_mocap": "p99 frame jump / mocap's", "foot_skate_m_s": "foot speed on the floor, m/s",
+          "pfc": "foot contact score PFC (EDGE)", "one_frame_steps": "one-frame joint steps > 30° (count)"}
+MOCAP_NOTE = ("* mocap: each clip of the styles danced, against its own motion beats (no music, no bars, "
+              "no loudness, no transitions)")
+
+
+def _songs(cfg: BenchConfig, progress) -> list[dict]:
+    """The bundled songs (tracked beats as reference) and the generated ones (exact beats and bars)."""
+    from ..music import analyze_music
+
+    out = []
+    for name in cfg.accent_songs or tuple(sorted(p.name for p in MUSIC_DIR.glob("*.ogg"))):
+        music = load_song(name)
+        out.append({"name": Path(name).name, "set": "bundled", "music": music, "beats": music.beat_times_s,
+                     "loudness": music.intensity_db, "beat_in_bar": music.beat_in_bar,
+                     "beats_per_bar": music.beats_per_bar})
+    if cfg.accent_generated:
+        from ..io.audio import load_audio
+        from ..music.intensity import beat_intensity_db
+        from .groundtruth import ground_truth_set
+
+        root = cfg.groundtruth_dir or _default_cache()
+        for song in ground_truth_set(root, quick=cfg.groundtruth_quick, specs=cfg.groundtruth_specs):
+            music = analyze_music(path=song.audio_path)
+            y, sr = load_audio(song.audio_path, sr=22050, mono=True)
+            out.append({"name": song.name, "set": "generated", "music": music, "beats": song.beats_s,
+                        "loudness": beat_intensity_db(y, sr, song.beats_s), "beat_in_bar": song.beat_in_bar,
+                        "beats_per_bar": song.beats_per_bar})
+    if progress:
+        progress(f"accents: {len(out)} songs")
+    return out
+
+
+def _default_cache() -> Path:
+    from ..motion.database import cache_dir
+
+    return cache_dir() / "groundtruth"
+
+
+def _score(clip, song: dict, reference) -> dict:
+    from .artefacts import one_frame_steps
+    from .evaluate import evaluate
+
+    jumps = np.asarray(clip.meta.get("transition_times_s", []), dtype=float)
+    jumps = jumps[(jumps >= 0) & (jumps <= clip.duration_s)]
+    rates = np.asarray(clip.meta["warp_rates"], dtype=float)
+    r = evaluate(clip, music_beats_s=song["beats"], music_loudness_db=song["loudness"],
+                 beat_in_bar=song["beat_in_bar"], beats_per_bar=song["beats_per_bar"], transitions_s=jumps,
+                 warp_rates=rates, mocap=reference)
+    r["warp_in_range"] = float(np.mean((rates >= 0.8) & (rates <= 1.25))) if rates.size else None
+    r["one_frame_steps"] = int(len(one_frame_steps(clip)))
+    return r
+
+
+def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
+    from .bench_structure import engine_dances
+    from .evaluate import mocap_reference
+
+    songs = _songs(cfg, progress)
+    clips_by_style, refs = {}, {}
+    per_song = []
+    for i, song in enumerate(songs):
+        if progress:
+            progress(f"accents: song {i + 1}/{len(songs)}: {song['name']}")
+        scores = {}
+        for name, clip in engine_dances(song["music"], db, cfg.seed, cfg.accent_engines, style=None).items():
+            key = (clip.meta["style"], clip.fps)
+            if key not in refs:
+                clips_by_style[key] = [at_fps(db.styles[key[0]].clip(c), clip.fps)
+                                       for c in range(db.styles[key[0]].n_clips)]
+                refs[key] = mocap_reference(clips_by_style[key], clip.fps)
+            scores[name] = _score(clip, song, refs[key])
+            scores[name]["style"] = clip.meta["style"]
+        per_song.append({"song": song["name"], "set": song["set"], "tempo_bpm": song["music"].tempo_bpm,
+                         "beats_per_bar": song["beats_per_bar"], "scores": scores})
+    mocap = {}
+    for (style, _), clips in clips_by_style.items():
+        if progress:
+            progress(f"accents: raw mocap of {style}")
+        rows = mocap_scores(_mocap_evaluate, clips, cfg.mocap_max_clips)
+        mocap[style] = rows["mean"]
+    return {"engines": list(cfg.accent_engines), "songs": per_song, "mocap": mocap,
+            "summary": summarise(per_song, mocap, cfg.accent_engines)}
+
+
+def _mocap_evaluate(clip, **kwargs):
+    from .artefacts import one_frame_steps
+    from .evaluate import evaluate
+
+    r = evaluate(clip, **kwargs)
+    r["one_frame_steps"] = int(len(one_frame_steps(clip)))
+    return r
+
+
+def summarise(per_song: list[dict], mocap: dict, engines) -> dict:
+    """Per engine and song set (bundled, generated): the mean of each key; 3/4 periods; the mocap row."""
+    out = {}
+    for subset in ("bundled", "generated"):
+        rows = [s for s in per_song if s["set"] == subset]
+        if not rows:
+            continue
+        table_ = {}
+        for e in engines:
+            scored = [s["scores"][e] for s in rows if e in s["scores"]]
+            four = [s["scores"][e] for s in rows if e in s["scores"] and s["beats_per_bar"] == 4]
+            three = [s["scores"][e] for s in rows if e in s["scores"] and s["beats_per_bar"] == 3]
+            m = mean_scores(scored)
+            m["bar_accent_on_downbeat"] = mean_scores(four).get("bar_accent_on_downbeat") if four else None
+            m["bar_accent_chance"] = 0.25 if four else None
+            m["waltz_period_3"] = (float(np.mean([r.get("energy_period_beats") == 3 for r in three]))
+                                   if three else None)
+            m["one_frame_steps"] = int(sum(r.get("one_frame_steps") or 0 for r in scored))
+            table_[e] = m
+        out[subset] = table_
+    out["mocap"] = mean_scores(list(mocap.values())) if mocap else {}
+    return out
+
+
+def format_accents(s: dict) -> str:
+    blocks = []
+    for subset, title in (("bundled", "bundled music (tracked beats and metre)"),
+                          ("generated", "generated songs (exact beats and bars)")):
+        if subset not in s["summary"]:
+            continue
+        cols = s["summary"][subset]
+        n = sum(1 for x in s["songs"] if x["set"] == subset)
+        header = ["metric"] + [TITLES[e] for e in cols] + [TITLES["mocap"]]
+        rows = [[LABELS[k]] + [cols[e].get(k) for e in cols] + [s["summary"]["mocap"].get(k)] for k in KEYS]
+        rows.append(["3/4 songs danced with a 3-beat energy period"] + [cols[e].get("waltz_period_3") for e in cols]
+                    + [None])
+        blocks.append(table(f"Visible accents, {title}: mean over {n} songs", header, rows,
+                            [0] + [2] * (len(header) - 1)))
+    return "\n".join(blocks + [f"  {MOCAP_NOTE}"])
