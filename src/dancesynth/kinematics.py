@@ -65,31 +65,87 @@ def _rotation_between(u, v):
     return _unit(q)
 
 
-def two_bone_ik(g_rot, g_pos, chain, target, hinge_axis=(1.0, 0.0, 0.0)):
+def bend_axis(g_rot, g_pos, chain) -> np.ndarray:
+    """The axis (3,), in the top joint's frame, about which a two-bone chain bends (a knee's hinge).
+
+    Each frame's bend-plane normal ``(top - mid) x (end - mid)`` is taken into the
+    top joint's frame and the normals are summed: a hinge bends one way, so bent
+    frames agree and nearly straight ones (short normals) hardly count. Zero when
+    no frame bends.
+    """
+    top, mid, end = chain
+    n = np.cross(g_pos[:, top] - g_pos[:, mid], g_pos[:, end] - g_pos[:, mid])
+    total = rot.apply(rot.inv(g_rot[:, top]), n).sum(axis=0)
+    norm = np.linalg.norm(total)
+    return total / norm if norm > 1e-9 else np.zeros(3)
+
+
+def two_bone_ik(g_rot, g_pos, chain, target, hinge_axis=None, *, bend_toward=None, pole_weight: float = 1.0,
+                soft: float = 0.03, pole_sin: float = 0.17):
     """Bend and swing a two-bone chain (e.g. hip-knee-ankle) so its end reaches ``target``.
 
     ``g_rot`` (F, J, 4) and ``g_pos`` (F, J, 3) are global transforms, ``chain`` the
     (top, middle, end) joint indices, ``target`` (F, 3). The middle joint's interior
-    angle is set by the law of cosines (bending in the chain's own plane), then the
+    angle is set by the law of cosines, bending in the chain's own plane, then the
     top joint swings the chain onto the target; the end keeps its global orientation.
-    Targets out of reach are approached as closely as the bone lengths allow.
+    A target at the end's current position changes nothing (for a chain bent the
+    right way).
+
+    Two things keep the result continuous from frame to frame:
+
+    - the pole: a nearly straight chain has no plane of its own (its normal is
+      noise), so within ``pole_sin`` (sine of the angle from straight) the bend
+      leans smoothly towards the side the middle joint belongs on, and a chain bent
+      the wrong way is read as bent the right way, so the middle joint never flips
+      sides (a target at the end then still turns a wrong-way chain round). That
+      side is ``bend_toward`` (F, 3), a world direction per frame (a knee points
+      over the toes), else the hinge ``hinge_axis`` (3,) in the top joint's frame,
+      else ``bend_axis`` of these frames. ``pole_weight`` (0 to 1) says how far to
+      trust it: below 1 a wrong-way bend is only partly turned round;
+    - soft reach: beyond the farther of the current reach and ``(1 - soft)`` of
+      full length the reach approaches full length exponentially instead of being
+      clamped, so the middle joint never snaps straight when a target passes out
+      of reach (the end then stops short of the target, along its line).
+
     Returns new global rotations (F, 3, 4) of (top, middle, end).
     """
     top, mid, end = chain
     h, k, a = g_pos[:, top], g_pos[:, mid], g_pos[:, end]
     len_a = np.linalg.norm(k - h, axis=-1)
     len_b = np.linalg.norm(a - k, axis=-1)
-    c = np.clip(np.linalg.norm(target - h, axis=-1), np.abs(len_a - len_b) + 1e-6, len_a + len_b - 1e-6)
-    u, v = h - k, a - k
-    cur = np.arccos(np.clip(np.sum(_unit(u) * _unit(v), axis=-1), -1.0, 1.0))
-    want = np.arccos(np.clip((len_a**2 + len_b**2 - c**2) / (2 * len_a * len_b), -1.0, 1.0))
+    full = len_a + len_b
+    reach = np.linalg.norm(target - h, axis=-1)
+    soft_from = np.maximum(full * (1.0 - soft), np.linalg.norm(a - h, axis=-1))
+    zone = np.maximum(full - soft_from, 1e-9)
+    beyond = np.maximum(reach - soft_from, 0.0)
+    reach = np.where(beyond > 0, soft_from + zone * (1.0 - np.exp(-beyond / zone)), reach)
+    reach = np.clip(reach, np.abs(len_a - len_b) + 1e-6, full - 1e-9)
+    want = np.arccos(np.clip((len_a**2 + len_b**2 - reach**2) / (2 * len_a * len_b), -1.0, 1.0))
+    u = _unit(h - k)
+    v = _unit(a - k)
     n = np.cross(u, v)
-    straight = np.linalg.norm(n, axis=-1) < 1e-8
-    if np.any(straight):
-        n[straight] = rot.apply(g_rot[straight, mid], np.asarray(hinge_axis, dtype=float))
-    bend = rot.exp(_unit(n) * (want - cur)[:, None])
+    if bend_toward is not None:
+        # A middle joint displaced towards d bends the chain about d x (top - end); its length
+        # says how well d defines a side (not at all along the chain), and weighs the pole.
+        pole = np.cross(_unit(np.asarray(bend_toward, float)), _unit(h - a))
+        strength = np.clip(np.linalg.norm(pole, axis=-1, keepdims=True) / 0.5, 0.0, 1.0)
+        pole = _unit(pole)
+    else:
+        hinge = bend_axis(g_rot, g_pos, chain) if hinge_axis is None else _unit(np.asarray(hinge_axis, float))
+        pole = rot.apply(g_rot[:, top], hinge if np.any(hinge) else np.array([1.0, 0.0, 0.0]))
+        strength = np.ones(n.shape[:-1] + (1,))
+    strength = strength * pole_weight
+    # Bent the wrong way past straight (mocap knees do, by a few degrees): mirror onto the pole's
+    # side. Mirroring every wrong-way bend, not only small ones, leaves no input where the side
+    # is undefined, so the result is continuous in the input.
+    along = np.sum(n * pole, axis=-1, keepdims=True)
+    n = n - 2.0 * strength * np.minimum(along, 0.0) * pole
+    lean = strength * np.clip(1.0 - np.linalg.norm(n, axis=-1, keepdims=True) / pole_sin, 0.0, 1.0) ** 2
+    side = _unit(np.cross(n + pole_sin * lean * pole, u))  # where the lower bone leaves the upper bone's line
+    w = np.cos(want)[:, None] * u + np.sin(want)[:, None] * side
+    bend = _rotation_between(v, w)
     mid_rot = rot.mul(bend, g_rot[:, mid])
-    a1 = k + rot.apply(bend, v)
+    a1 = k + len_b[:, None] * w
     swing = _rotation_between(a1 - h, target - h)
     new_top = rot.mul(swing, g_rot[:, top])
     new_mid = rot.mul(swing, mid_rot)

@@ -5,11 +5,18 @@ music interval ``t0 -> t1``, time-warped linearly so that the source beat frames
 land exactly on the music beats (Xu et al.: "modifying the frame rate between two
 nodes"). Where the source changes (a jump), the new motion is
 
-- re-placed on the floor: rotated about the vertical axis and shifted so that its
-  root continues from where the old one was, with the same heading, and
+- re-placed on the floor: rotated about the vertical axis to the old heading and
+  shifted so that it stands on the old motion's planted foot (or, with no foot
+  planted in both, so that its root continues from the old root), and
 - blended in by *inertialization*: the pose and velocity difference between the
-  old and the new motion at the jump decays to zero over ``blend_s`` with a cubic
-  Hermite curve, so position and velocity stay continuous.
+  old and the new motion at the jump, as a rotation-vector offset per joint, decays
+  to zero with a cubic Hermite curve, so pose and velocity stay continuous. Each
+  joint decays over ``blend_s`` or longer: long enough that the decay never
+  accelerates the joint faster than ``BLEND_ACCEL_RAD_S2`` (a big difference
+  takes longer to fade than a small one, instead of snapping in a fixed time), and
+  a velocity difference is carried only as far as ``BLEND_MAX_SWING_RAD`` allows.
+  The difference is measured on frames that are shown, so a mocap glitch in the
+  unplayed frames past a piece's end never leaks into the dance.
 
 Rendering is incremental (``StitchState`` carries the placement and any blend in
 progress), so the streaming engine can render segment by segment and a segment
@@ -23,8 +30,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .. import rotations as rot
+from ..kinematics import fk
 from ..motion.database import Style
 from ..motion.resample import sample_frames
+from ..motion.roles import find_roles
 
 
 @dataclass(frozen=True)
@@ -41,23 +50,77 @@ class Pieces:
         return len(self.t0)
 
 
+#: Fastest angular acceleration an inertialization decay may add (rad/s^2). The mocap's
+#: own 99th percentile is several hundred; a decay well under it hides in the motion.
+BLEND_ACCEL_RAD_S2 = 100.0
+#: Same for the root's position (m/s^2), across the floor and up or down: the body may glide
+#: over a planted foot for a while, but a height difference held long sinks the feet into the
+#: floor or lifts them off it.
+BLEND_ACCEL_M_S2 = np.array([6.0, 30.0, 6.0])
+#: No decay lasts longer (s): past this the two motions are mixed for too long.
+BLEND_MAX_S = 1.0
+#: How far a carried velocity difference may swing a joint past its offset before the
+#: decay brings it back (rad): more of a violent difference is dropped instead, so it
+#: cannot overshoot into a pose neither motion has.
+BLEND_MAX_SWING_RAD = 0.6
+
+
 @dataclass(frozen=True)
 class Blend:
-    """An inertialization offset starting at ``t0``: value and velocity, decaying over ``duration``."""
+    """An inertialization offset starting at ``t0``: value and velocity, decaying to zero.
+
+    Rotations decay per joint over ``duration`` (J,), the root position per axis over ``pos_duration`` (3,).
+    """
 
     t0: float
-    duration: float
-    rot_x0: np.ndarray  # (J, 3) rotation-vector offsets
+    duration: np.ndarray  # (J,) seconds
+    rot_x0: np.ndarray    # (J, 3) rotation-vector offsets
     rot_v0: np.ndarray
-    pos_x0: np.ndarray  # (3,) root position offset
+    pos_duration: np.ndarray  # (3,) seconds
+    pos_x0: np.ndarray    # (3,) root position offset
     pos_v0: np.ndarray
 
+    @property
+    def end_s(self) -> float:
+        return self.t0 + max(float(np.max(self.duration)), float(np.max(self.pos_duration)))
+
     def at(self, t: np.ndarray):
-        s = np.clip((np.asarray(t, float) - self.t0) / self.duration, 0.0, 1.0)[:, None]
-        h00 = 2 * s**3 - 3 * s**2 + 1
-        h10 = (s**3 - 2 * s**2 + s) * self.duration
-        return (h00[..., None] * self.rot_x0 + h10[..., None] * self.rot_v0,
-                h00 * self.pos_x0 + h10 * self.pos_v0)
+        dt = np.asarray(t, float)[:, None] - self.t0
+        h00, h10 = decay_basis(np.clip(dt / self.duration, 0.0, 1.0))            # (n, J)
+        rx = h00[..., None] * self.rot_x0 + (h10 * self.duration)[..., None] * self.rot_v0
+        p00, p10 = decay_basis(np.clip(dt / self.pos_duration, 0.0, 1.0))      # (n, 3)
+        return rx, p00 * self.pos_x0 + p10 * self.pos_duration * self.pos_v0
+
+
+def carried_speed(size, accel, swing):
+    """Fastest velocity difference a decay of an offset of ``size`` carries.
+
+    A Hermite decay over ``T`` that starts at speed ``v`` swings past its offset by
+    up to ``4/27 v T``; with ``T = decay_time(size, v)`` that is ``swing`` at::
+
+        v = 2 sqrt(accel) swing / sqrt(24 k^2 size + 16 k swing),  k = 4/27
+    """
+    k = 4.0 / 27.0
+    return 2.0 * np.sqrt(accel) * swing / np.sqrt(24 * k * k * np.asarray(size, float) + 16 * k * swing)
+
+
+def decay_time(size, speed, min_s: float, accel):
+    """Shortest decay time (>= ``min_s``, <= ``BLEND_MAX_S``) whose Hermite curve from an offset
+    of ``size`` moving at ``speed`` never accelerates faster than ``accel``.
+
+    The curve's acceleration peaks at its start, ``(6 size + 4 T speed) / T^2``; solved for T.
+    """
+    size, speed = np.asarray(size, float), np.asarray(speed, float)
+    t = (4 * speed + np.sqrt(16 * speed**2 + 24 * accel * size)) / (2 * accel)
+    low = max(min_s, 1e-3)  # a zero blend time would divide by zero
+    return np.clip(t, low, max(low, BLEND_MAX_S))
+
+
+def decay_basis(s):
+    """Cubic Hermite weights ``(h00, h10)`` at ``s`` in [0, 1] that take an offset (value x0,
+    velocity v0) to rest: ``x(s) = h00 x0 + h10 duration v0``, with x and x' zero at s = 1."""
+    s = np.asarray(s, dtype=np.float64)
+    return 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
 
 
 @dataclass(frozen=True)
@@ -109,46 +172,91 @@ def _clamp_frame(style: Style, f: float, near: float) -> float:
     return float(np.clip(f, style.clip_starts[c], style.clip_starts[c + 1] - 1))
 
 
-def _velocity_pair(style, f_a, f_b, yaw, offset, blend, t_a, t_b):
-    """Poses at source frames ``f_a`` and ``f_b`` (shown at ``t_a``, ``t_b``), with ``blend`` applied."""
-    local, root, _ = _place(style, [f_a, f_b], yaw, offset)
+def _posed(style, frames, yaw, offset, blend, times):
+    """Poses at source ``frames`` placed by (yaw, offset) and shown at ``times``, with ``blend`` applied."""
+    local, root, _ = _place(style, frames, yaw, offset)
     if blend is not None:
-        rx, px = blend.at(np.array([t_a, t_b]))
+        rx, px = blend.at(np.asarray(times, float))
         local = rot.mul(rot.exp(rx), local)
         root = root + px
     return local, root
 
 
-def _jump_blend(style, state: StitchState, f_new: float, rate_new: float, yaw, offset, t0, blend_s) -> Blend:
-    """The inertialization offset that carries the old motion's pose and velocity into the new one."""
-    h = 1.0 / style.fps
+def _shown(style, f_at, rate, t_ref, times, yaw, offset, blend):
+    """Poses of a piece that shows source frame ``f_at`` at ``t_ref`` at ``rate``, at output ``times``."""
+    frames = [_clamp_frame(style, f_at + rate * (t - t_ref), f_at) for t in times]
+    return _posed(style, frames, yaw, offset, blend, times)
+
+
+def _jump_blend(style, state: StitchState, f_new: float, rate_new: float, yaw, offset, t0, blend_s,
+                fps: float) -> Blend:
+    """The inertialization offset that carries the old motion's pose and velocity into the new one.
+
+    Only frames that are shown enter it: the old motion's last two output frames
+    before ``t0`` and the new one's first two, each extrapolated to ``t0`` at its
+    own angular velocity (source frames past a piece's end are never shown, and
+    mocap glitches there must not be blended in). The offset is ``log(old * new^-1)``
+    per joint; its velocity is the offset's own rate of change, so decaying it in
+    rotation-vector space keeps the shown angular velocity continuous however far
+    apart the poses are.
+    """
+    dt = 1.0 / fps
+    t_new = np.ceil(t0 * fps - 1e-9) / fps + np.array([0.0, dt])   # a frame at t0 shows the new piece
+    t_old = t_new[0] - np.array([2 * dt, dt])
     rate_old = (state.last_f1 - state.last_f0) / (state.last_t1 - state.last_t0)
-    f_old_prev = _clamp_frame(style, state.last_f1 - rate_old * h, state.last_f1)
-    old, old_root = _velocity_pair(style, f_old_prev, state.last_f1, state.yaw, state.offset,
-                                   state.blend, t0 - h, t0)
-    f_new_next = _clamp_frame(style, f_new + rate_new * h, f_new)
-    new, new_root = _velocity_pair(style, f_new, f_new_next, yaw, offset, None, t0, t0 + h)
-    x0 = rot.log(rot.mul(old[1], rot.inv(new[0])))
-    v_old = rot.log(rot.mul(old[1], rot.inv(old[0]))) / h
-    v_new = rot.log(rot.mul(new[1], rot.inv(new[0]))) / h
-    v0 = v_old - v_new
-    # Cap the velocity term so a violent difference cannot overshoot into a new pose.
-    cap = 1.0 / blend_s
-    scale = np.minimum(1.0, cap / np.maximum(np.linalg.norm(v0, axis=-1, keepdims=True), 1e-9))
-    p0 = old_root[1] - new_root[0]
-    pv0 = (old_root[1] - old_root[0]) / h - (new_root[1] - new_root[0]) / h
-    return Blend(float(t0), blend_s, x0, v0 * scale, p0, pv0)
+    old, old_root = _shown(style, state.last_f1, rate_old, t0, t_old, state.yaw, state.offset, state.blend)
+    new, new_root = _shown(style, f_new, rate_new, t0, t_new, yaw, offset, None)
+    w_old = rot.log(rot.mul(old[1], rot.inv(old[0]))) / dt
+    w_new = rot.log(rot.mul(new[1], rot.inv(new[0]))) / dt
+
+    def offset_at(t):
+        o = rot.mul(rot.exp(w_old * (t - t_old[1])), old[1])
+        n = rot.mul(rot.exp(w_new * (t - t_new[0])), new[0])
+        return rot.log(rot.mul(o, rot.inv(n)))
+
+    eps = 1e-3 * dt
+    x0 = offset_at(t0)
+    v0 = (offset_at(t0 + eps) - offset_at(t0 - eps)) / (2 * eps)
+    # Near 180 degrees the rotation vector wraps: no velocity there rather than a wrong one.
+    v0[np.linalg.norm(v0, axis=-1) * eps > 1.0] = 0.0
+    size, speed = np.linalg.norm(x0, axis=-1), np.linalg.norm(v0, axis=-1)
+    carried = np.minimum(speed, carried_speed(size, BLEND_ACCEL_RAD_S2, BLEND_MAX_SWING_RAD))
+    v0 *= (carried / np.maximum(speed, 1e-9))[:, None]
+    duration = decay_time(size, carried, blend_s, BLEND_ACCEL_RAD_S2)
+    v_old, v_new = (old_root[1] - old_root[0]) / dt, (new_root[1] - new_root[0]) / dt
+    p0 = old_root[1] + v_old * (t0 - t_old[1]) - new_root[0] - v_new * (t0 - t_new[0])
+    pv0 = v_old - v_new
+    across, up = [0, 2], [1]
+    pos_duration = np.empty(3)
+    for axes in (across, up):
+        pos_duration[axes] = decay_time(np.linalg.norm(p0[axes]), np.linalg.norm(pv0[axes]), blend_s,
+                                        BLEND_ACCEL_M_S2[axes[0]])
+    return Blend(float(t0), duration, x0, v0, pos_duration, p0, pv0)
 
 
-def _aligned_placement(style, state: StitchState, f_new: float):
-    """(yaw, offset) that puts source frame ``f_new`` where the old motion's last frame is, same heading."""
-    _, old_root, _ = _place(style, [state.last_f1], state.yaw, state.offset)
+def _aligned_placement(style, state: StitchState, f_new: float, t0: float):
+    """(yaw, offset) that puts source frame ``f_new`` where the old motion is at ``t0``, same heading.
+
+    Where a foot is planted in both motions, the new motion stands on the old one's
+    planted foot (both feet: their midpoint): the blend then moves the body over the
+    foot instead of dragging the foot, which the foot lock would otherwise have to
+    hold against a growing offset. Else the root continues from the old root.
+    """
     old_yaw = state.yaw + rot.heading(style.local_rot[int(round(state.last_f1)), 0].astype(float))
     new_yaw = rot.heading(style.local_rot[int(round(f_new)), 0].astype(float))
     yaw = float(old_yaw - new_yaw)
+    planted = style.contacts[int(round(state.last_f1))] & style.contacts[int(round(f_new))]
+    if planted.any():
+        ankles = [a for a, p in zip(find_roles(style.skeleton).ankles, planted) if p]
+        sk = style.skeleton
+        old, old_root = _posed(style, [state.last_f1], state.yaw, state.offset, state.blend, [t0])
+        new, new_root = _posed(style, [f_new], yaw, np.zeros(2), None, [t0])
+        old_feet = fk(old, old_root, sk.offsets, sk.parents, only=ankles)[1][0, ankles]
+        new_feet = fk(new, new_root, sk.offsets, sk.parents, only=ankles)[1][0, ankles]
+        return yaw, (old_feet - new_feet).mean(axis=0)[[0, 2]]
+    _, old_root, _ = _place(style, [state.last_f1], state.yaw, state.offset)
     _, new_root, _ = _place(style, [f_new], yaw, np.zeros(2))
-    offset = old_root[0, [0, 2]] - new_root[0, [0, 2]]
-    return yaw, offset
+    return yaw, old_root[0, [0, 2]] - new_root[0, [0, 2]]
 
 
 def render(style: Style, pieces: Pieces, state: StitchState, *, fps: float, end_s: float,
@@ -172,8 +280,8 @@ def render(style: Style, pieces: Pieces, state: StitchState, *, fps: float, end_
             offset = -root[0, [0, 2]]
             st = replace(st, yaw=yaw, offset=offset)
         elif pieces.jump[k]:
-            yaw, offset = _aligned_placement(style, st, f0)
-            blend = _jump_blend(style, st, f0, (f1 - f0) / (t1 - t0), yaw, offset, t0, blend_s)
+            yaw, offset = _aligned_placement(style, st, f0, t0)
+            blend = _jump_blend(style, st, f0, (f1 - f0) / (t1 - t0), yaw, offset, t0, blend_s, fps)
             st = replace(st, yaw=yaw, offset=offset, blend=blend)
             blends.append((t0, blend))
         yaws[k], offsets[k] = st.yaw, st.offset
@@ -209,7 +317,7 @@ def render(style: Style, pieces: Pieces, state: StitchState, *, fps: float, end_
         local[sel] = rot.mul(rot.exp(rx), local[sel])
         root[sel] += px
     final_blend = blends[-1][1]
-    if final_blend is not None and (n == 0 or t[-1] >= final_blend.t0 + final_blend.duration):
+    if final_blend is not None and (n == 0 or t[-1] >= final_blend.end_s):
         final_blend = None
     st = replace(st, next_frame=int(last + 1), blend=final_blend)
     # A new placement starts on the first frame of every piece that begins with a jump.
