@@ -88,14 +88,16 @@ def evaluate_files(dance_path: Path, song_path: Path, *, reference_path: Path | 
     report = load_dance_report(report_path) if report_path is not None else None
     mocap_style, clips = _pick_mocap(dance, music, style, report, database)
     reference_mocap = mocap_reference(clips, dance.fps) if clips else None
-    common = dict(music_beats_s=music.beat_times_s, music_loudness_db=music.intensity_db, params=params)
+    common = dict(music_beats_s=music.beat_times_s, music_loudness_db=music.intensity_db, params=params,
+                  beat_in_bar=music.beat_in_bar, beats_per_bar=music.beats_per_bar)
     result = {
         "dance": evaluate(dance, transitions_s=report["transition_times_s"] if report else None,
                           warp_rates=report["warp_rates"] if report else None,
                           mocap=reference_mocap, **common),
         "song": {"path": str(song_path), "duration_s": music.duration_s, "tempo_bpm": music.tempo_bpm,
                  "beats": len(music.beat_times_s), "beat_confidence": music.beat_confidence,
-                 "default_tempo": music.default_tempo},
+                 "default_tempo": music.default_tempo, "beats_per_bar": music.beats_per_bar,
+                 "metre_confidence": music.meta.get("metre_confidence")},
         "mocap_style": mocap_style,
         "params": asdict(params),
     }
