@@ -191,3 +191,18 @@ def test_a_section_that_cannot_run_is_recorded_and_the_others_run(tmp_path):
 def test_unknown_section_is_refused(tmp_path):
     with pytest.raises(ValueError, match="unknown bench section"):
         run_bench(quick=True, out_dir=tmp_path, config=replace(BenchConfig.quick(), sections=("fig5",)))
+
+
+def test_accents_score_every_engine_beside_chance_a_random_walk_and_the_mocap(bench):
+    s = bench[0]["accents"]
+    assert {x["set"] for x in s["songs"]} == {"bundled", "generated"}
+    for subset in ("bundled", "generated"):
+        table = s["summary"][subset]
+        assert set(table) == set(s["engines"])
+        for row in table.values():
+            assert 0 <= row["accent_recall_chance"] < row["accent_recall"] <= 1
+            assert row["warp_in_range"] is not None and row["one_frame_steps"] >= 0
+    # The generated 3/4 song is scored in bars of three, the 4/4 one in fours.
+    assert sorted(x["beats_per_bar"] for x in s["songs"] if x["set"] == "generated") == [3, 4]
+    assert s["summary"]["generated"]["streaming"]["waltz_period_3"] in (0.0, 1.0)
+    assert s["summary"]["mocap"]["accent_recall"] is not None

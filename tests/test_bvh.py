@@ -156,7 +156,9 @@ def test_parse_speed():
     clip = parse_bvh(big)
     elapsed = time.perf_counter() - start
     assert clip.n_frames == 3600 and clip.skeleton.n_joints == 43
-    assert elapsed < 0.5, f"{elapsed:.2f} s"
+    # About 0.2 s on an idle 2-core machine; the bound only catches an order-of-magnitude slowdown,
+    # since a loaded machine (a benchmark running beside the tests) makes any wall-clock bound flaky.
+    assert elapsed < 2.0, f"{elapsed:.2f} s"
 
 
 # ----------------------------------------------------------------------------- small files

@@ -107,7 +107,7 @@ def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
     for i, song in enumerate(songs):
         if progress:
             progress(f"accents: song {i + 1}/{len(songs)}: {song['name']}")
-        scores = {}
+        scores, styles = {}, {}
         for name, clip in engine_dances(song["music"], db, cfg.seed, cfg.accent_engines, style=None).items():
             key = (clip.meta["style"], clip.fps)
             if key not in refs:
@@ -115,9 +115,9 @@ def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
                                        for c in range(db.styles[key[0]].n_clips)]
                 refs[key] = mocap_reference(clips_by_style[key], clip.fps)
             scores[name] = _score(clip, song, refs[key])
-            scores[name]["style"] = clip.meta["style"]
+            styles[name] = clip.meta["style"]
         per_song.append({"song": song["name"], "set": song["set"], "tempo_bpm": song["music"].tempo_bpm,
-                         "beats_per_bar": song["beats_per_bar"], "scores": scores})
+                         "beats_per_bar": song["beats_per_bar"], "styles": styles, "scores": scores})
     mocap = {}
     for (style, _), clips in clips_by_style.items():
         if progress:
