@@ -50,9 +50,9 @@ class Pieces:
         return len(self.t0)
 
 
-#: Fastest angular acceleration an inertialization decay may add (rad/s^2). The mocap's
-#: own 99th percentile is several hundred; a decay well under it hides in the motion.
-BLEND_ACCEL_RAD_S2 = 100.0
+#: Fastest angular acceleration an inertialization decay may add (rad/s^2): about what
+#: the mocap itself reaches in its roughest 1 % of frames, so a decay hides in the motion.
+BLEND_ACCEL_RAD_S2 = 300.0
 #: Same for the root's position (m/s^2), across the floor and up or down: the body may glide
 #: over a planted foot for a while, but a height difference held long sinks the feet into the
 #: floor or lifts them off it.
