@@ -28,12 +28,7 @@ intervals they close. Nothing given is ever revised.
 6. Times are refined to the onset peak and moved 13 ms earlier, as offline.
 7. Bars: once a beat is given, the interval it closes gets ``music.metre.beat_features``
    from the audio buffer (an excerpt on the offline frame grid: the values a whole
-   recording gets). ``music.metre.estimate_metre`` on the last ``BAR_HISTORY_BEATS``
-   intervals decides the metre and the phase, and
-   each new beat gets its bar position by counting on from the latest decision. Until
-   ``BAR_MIN_BEATS`` intervals are known the count is 4/4 from the first beat; a
-   decision with no confidence keeps the count going. Positions given are never
-   revised: when the phase changes, the count jumps.
+   recording gets), and ``live.bars.BarCounter`` counts the new beats' bar positions.
 
 Memory is bounded: audio and spectra of ``history_s`` in fixed buffers, a few short
 arrays of recent beats; nothing grows with the stream.
@@ -49,7 +44,9 @@ from ..beat_tracking import _dp, beat_local_score, metrical_level, tempo_curve
 from ..errors import InputError
 from ..music.beats import ONSET_LATENCY_S, TRAILING_BEAT_FRACTION, _peak_envelope, refine_beat_frames
 from ..music.intensity import rms_db
-from ..music.metre import CHROMA_HOP, DEFAULT_BEATS_PER_BAR, FEATURE_SR, N_FEATURES, beat_features, estimate_metre
+from ..music.metre import CHROMA_HOP, DEFAULT_BEATS_PER_BAR, FEATURE_SR, N_FEATURES, beat_features
+from .bars import BarCounter
+from .ring import Ring
 from ..music.onset import ANALYSIS_SR, HOP_LENGTH, N_FFT, N_MELS, mel_filterbank, power_to_db
 
 FPS = ANALYSIS_SR / HOP_LENGTH
@@ -73,12 +70,6 @@ MIN_GAP_PERIODS = 0.5
 REPHASE_MIN_BEATS = 4
 REPHASE_GAIN = 4.0
 DUE_EARLY_PERIODS = 0.15   # an update runs the analysis again from this far before the next beat seen
-# Bars: the metre is decided on the features of the last this many beat intervals
-# (32 s at 120 bpm: several periodicity windows, and enough bars to outvote a fill).
-BAR_HISTORY_BEATS = 64
-# The first decision comes after two bars of 4 (offline waits for three): on the generated
-# songs updated every 5 s this gives every downbeat after 5 s (mean F 1.00 where 12 gives 0.99).
-BAR_MIN_BEATS = 8
 # Audio kept around a beat interval for its features: the bass rise looks a quarter
 # interval back, the chroma windows reach 85 ms beyond the interval, resampling needs a margin.
 BAR_MARGIN_S = 0.25
@@ -116,31 +107,6 @@ class BeatUpdate:
     metre_confidence: float = 0.0
 
 
-class _Ring:
-    """A fixed-capacity buffer of rows that keeps the last ``keep`` rows (amortised O(1) append)."""
-
-    def __init__(self, keep: int, row_shape: tuple = (), dtype=np.float32, start: int = 0):
-        self.keep, self.data = keep, np.zeros((2 * keep,) + row_shape, dtype=dtype)
-        self.size, self.start = 0, start    # rows held; global index of data[0]
-
-    def append(self, rows: np.ndarray, on_drop=None) -> None:
-        if self.size + len(rows) > len(self.data):
-            drop = max(self.size - self.keep, self.size + len(rows) - len(self.data), 0)
-            if on_drop is not None:
-                on_drop(self.data[:drop], self.start)
-            self.data[:self.size - drop] = self.data[drop:self.size]
-            self.size, self.start = self.size - drop, self.start + drop
-        self.data[self.size:self.size + len(rows)] = rows
-        self.size += len(rows)
-
-    def view(self) -> np.ndarray:
-        return self.data[:self.size]
-
-    @property
-    def end(self) -> int:
-        return self.start + self.size
-
-
 class StreamingBeatTracker:
     """Beats of streamed audio, given once sure, never revised (see the module's notes).
 
@@ -162,10 +128,10 @@ class StreamingBeatTracker:
             raise InputError(f"history_s must be between {max(6.0, latency_s + 4.0):g} and 600 s, got {history_s!r}")
         self.sr, self.history_s, self.fallback_bpm, self.latency_s = int(sr), history_s, fallback_bpm, latency_s
         # Audio from global sample -_HALF on: the zeros before the stream's start frame the first windows.
-        self._audio = _Ring(int(round(history_s * sr)) + N_FFT + HOP_LENGTH, start=-_HALF)
+        self._audio = Ring(int(round(history_s * sr)) + N_FFT + HOP_LENGTH, start=-_HALF)
         self._audio.append(np.zeros(_HALF, dtype=np.float32))
         # Per frame: the mel power spectrum, and last the sum of squares of its 2048 samples.
-        self._mel = _Ring(int(round(history_s * FPS)), (N_MELS + 1,))
+        self._mel = Ring(int(round(history_s * FPS)), (N_MELS + 1,))
         # The mel filters as (bin, weight) runs: each band is a few contiguous FFT bins, and
         # a sparse sum needs no BLAS call (whose threads cost more than the work for 5 frames).
         basis = mel_filterbank(sr, N_FFT, n_mels=N_MELS)
@@ -184,11 +150,7 @@ class StreamingBeatTracker:
         self._given = np.full(64, -1, dtype=np.int64)  # DP frames of the last beats given, the last last
         self._gain, self._rephasing = 0.0, False    # the last re-phase comparison; did it re-phase
         self._tempo_bpm, self._loud_db, self._loud_at, self._next_due = 0.0, -np.inf, 0.0, -np.inf
-        # Bars: features of the last intervals (oldest first; NaN: none yet), beats given so
-        # far, and the count in force: beat k sits at (k - _bar_ref) % _bar_metre.
-        self._bar_rows = np.full((BAR_HISTORY_BEATS, N_FEATURES), np.nan)
-        self._bar_known, self._n_given = 0, 0
-        self._bar_metre, self._bar_ref, self._bar_confidence = DEFAULT_BEATS_PER_BAR, 0, 0.0
+        self._bars = BarCounter()
 
     @property
     def heard_s(self) -> float:
@@ -287,26 +249,14 @@ class StreamingBeatTracker:
             self._given = np.concatenate((self._given, frames))[-self._given.size:]
         self._rephasing = False
         return BeatUpdate(beats, intensity, float(self._tempo_bpm), self.heard_s, ~real, self.latency_s,
-                          positions, self._bar_metre, self._bar_confidence)
+                          positions, self._bars.metre, self._bars.confidence)
 
     def _bar_positions(self, beats: np.ndarray) -> np.ndarray:
         """Bar positions of the new beats; first the intervals they close join the bar history."""
         if beats.size == 0:
             return np.zeros(0, dtype=np.int64)
         known = np.concatenate(([self._last_s], beats)) if np.isfinite(self._last_s) else beats
-        rows = self._interval_features(known)
-        if rows.shape[0]:
-            self._bar_rows = np.concatenate((self._bar_rows, rows))[-BAR_HISTORY_BEATS:]
-            self._bar_known = min(self._bar_known + rows.shape[0], BAR_HISTORY_BEATS)
-            if self._bar_known >= BAR_MIN_BEATS:
-                metre, path, confidence = estimate_metre(self._bar_rows[-self._bar_known:], min_beats=BAR_MIN_BEATS)
-                if confidence > 0:
-                    # The last row is the interval of the beat before the newest one.
-                    self._bar_metre, self._bar_confidence = metre, confidence
-                    self._bar_ref = self._n_given + beats.size - 2 - int(path[-1])
-        index = self._n_given + np.arange(beats.size)
-        self._n_given += beats.size
-        return (index - self._bar_ref) % self._bar_metre
+        return self._bars.count(self._interval_features(known), beats.size)
 
     def _interval_features(self, known: np.ndarray) -> np.ndarray:
         """``beat_features`` of the intervals between consecutive ``known`` beats, from the audio buffer.
@@ -452,7 +402,8 @@ class StreamingBeatTracker:
 
     def memory_bytes(self) -> int:
         """Bytes held by the tracker's arrays (constant over the stream)."""
-        arrays = [self._audio.data, self._mel.data] + [a for a in vars(self).values() if isinstance(a, np.ndarray)]
+        arrays = [self._audio.data, self._mel.data, self._bars.rows] + [a for a in vars(self).values()
+                                                                        if isinstance(a, np.ndarray)]
         return sum(a.nbytes for a in arrays)
 
 
