@@ -186,6 +186,9 @@ FROZEN = {
     "accent_precision": 0.4, "accent_precision_chance": 0.254945054945055,
     "accent_precision_x_chance": 1.5689655172413792, "accent_recall": 0.4, "accent_recall_chance": 0.254945054945055,
     "accent_recall_x_chance": 1.5689655172413792,
+    "joint_speed_p99_m_s": 10.87290420120313, "joint_speed_p99_vs_mocap": 68.49090383939581,
+    "root_travel_m_s": 0.12105428486572342, "root_travel_vs_mocap": 11.191721812915166,
+    "foot_skate_vs_mocap": 35.256074978922655, "pfc_vs_mocap": 324.9837879500092,
 }
 
 

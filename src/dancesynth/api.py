@@ -74,16 +74,16 @@ def segment_bounds(times_s: np.ndarray, segment_s: float) -> list[tuple[int, int
 
 
 def synthesise(engine: GraphEngine, grid: BeatGrid, duration_s: float, config: DanceConfig,
-               progress: Progress | None = None, music: MusicFeatures | None = None
-               ) -> tuple[list[SegmentFrames], dict]:
+               progress: Progress | None = None) -> tuple[list[SegmentFrames], dict]:
     """Run the chosen engine over a beat grid; returns the rendered segments and step timings.
 
-    With ``music``, its metre (``beat_in_bar``) goes to the engine with each segment."""
-    bars, beats_per_bar = grid_bar_positions(grid.times_s, music)
+    The grid's metre (``bar_position``), where known, goes to the engine with each segment."""
+    bars, beats_per_bar = grid.bar_position, grid.beats_per_bar
     if config.engine == "global":
         t = time.perf_counter()
         out = [engine.run_global(grid.times_s, grid.intensity_db, duration_s, seed=config.seed,
-                                 bar_position=bars, beats_per_bar=beats_per_bar, music_beat=grid.is_music_beat)]
+                                 bar_position=bars, beats_per_bar=beats_per_bar, music_beat=grid.is_music_beat,
+                                 beat_count=grid.count)]
         return out, {"segments": 1, "step_s": [time.perf_counter() - t], "boundaries_s": np.zeros(0)}
     state = engine.initial_state(config.seed)
     bounds = segment_bounds(grid.times_s, config.segment_s)
@@ -93,7 +93,8 @@ def synthesise(engine: GraphEngine, grid: BeatGrid, duration_s: float, config: D
         seg = MusicSegment(grid.times_s[b:e + 1], grid.intensity_db[b:e],
                            remaining_beats=grid.n_intervals - e, end_s=duration_s if last else None,
                            bar_position=bars[b:e + 1], beats_per_bar=beats_per_bar,
-                           music_beat=grid.is_music_beat[b:e + 1])
+                           music_beat=grid.is_music_beat[b:e + 1],
+                           beat_count=None if grid.count is None else grid.count[b:e + 1])
         t = time.perf_counter()
         state, frames = engine.step(state, seg)
         step_s.append(time.perf_counter() - t)
@@ -102,19 +103,6 @@ def synthesise(engine: GraphEngine, grid: BeatGrid, duration_s: float, config: D
             progress("synthesis", i + 1, len(bounds))
     return out, {"segments": len(bounds), "step_s": step_s,
                  "boundaries_s": grid.times_s[[e for _, e in bounds[:-1]]]}
-
-
-def grid_bar_positions(grid_times_s: np.ndarray, music: MusicFeatures | None) -> tuple[np.ndarray, int | None]:
-    """Each grid beat's position in its bar (-1 where it is no music beat or the metre is unknown)."""
-    out = np.full(len(grid_times_s), -1, dtype=np.int64)
-    if music is None or music.beat_in_bar is None:
-        return out, None
-    beats = music.beat_times_s
-    i = np.clip(np.searchsorted(beats, grid_times_s), 0, len(beats) - 1)
-    for j in (i, np.maximum(i - 1, 0)):  # the grid holds the music's beats as they are, give or take rounding
-        hit = np.abs(beats[j] - grid_times_s) < 1e-6
-        out[hit] = music.beat_in_bar[j[hit]]
-    return out, music.beats_per_bar
 
 
 def analyse(song, max_duration_s: float = 15 * 60.0) -> MusicFeatures:
@@ -142,18 +130,45 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
 
     t = time.perf_counter()
     db = database if isinstance(database, MotionDatabase) else open_database(database)
+    name = music.source if isinstance(song, MusicFeatures) else str(song)
     if config.engine == "neural":  # the learned pose generator (Aristidou et al. §4); torch loads lazily
         from .engines.neural.engine import neural_dance
 
         timings["database_s"] = time.perf_counter() - t
-        return neural_dance(music, db, config, song=music.source if isinstance(song, MusicFeatures) else str(song),
-                            timings=timings)
-    if config.engine == "choreography":  # motifs by eq. (5), danced with mocap words (Aristidou et al. §5.2)
+        clip = neural_dance(music, db, config, song=name, timings=timings)
+    elif config.engine == "choreography":  # motifs by eq. (5), danced with mocap words (Aristidou et al. §5.2)
         from .engines.choreography import choreography_dance
 
         timings["database_s"] = time.perf_counter() - t
-        return choreography_dance(music, db, config, timings=timings,
-                                  song=music.source if isinstance(song, MusicFeatures) else str(song))
+        clip = choreography_dance(music, db, config, timings=timings, song=name)
+    else:
+        clip = _graph_dance(music, db, config, song, timings, t, progress)
+    clip.meta["summary"].update(metre_summary(clip, music, clip.meta["summary"].get("warnings", [])))
+    return clip
+
+
+def metre_summary(clip: MotionClip, music: MusicFeatures, warnings: list) -> dict:
+    """What the dance made of the metre: the period (in beats) at which its energy per beat repeats,
+    and a warning where a song in three is not danced in three (the style's moves repeat in twos and
+    fours)."""
+    from .eval.beat_metrics import dominant_beat_period
+    from .eval.motion_metrics import beat_interval_energy
+
+    if not music.beats_per_bar or music.n_beats < 4:
+        return {}
+    energy = beat_interval_energy(clip, music.beat_times_s)
+    period, _ = dominant_beat_period(energy[np.isfinite(energy)])
+    out = {"beats_per_bar": int(music.beats_per_bar), "dance_period_beats": period}
+    if music.beats_per_bar == 3 and period is not None and period != 3:
+        out["warnings"] = list(warnings) + [
+            f"the song is in 3/4, but the dance's energy repeats every {period} beats, not in three: the "
+            f"'{clip.meta['summary'].get('style')}' moves found for it do not follow a waltz's bars"]
+    return out
+
+
+def _graph_dance(music: MusicFeatures, db: MotionDatabase, config: DanceConfig, song, timings: dict,
+                 t: float, progress: Progress | None) -> MotionClip:
+    """``dance`` for the meta-motion-graph engines (streaming, its signature variant, global)."""
     # The style and metrical level that warp the beat pieces least (engines/beatgrid.py).
     fit = fit_style(db, music, config.style)
     style, subdivide = fit.style, fit.subdivide
@@ -171,7 +186,7 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
 
         signature = database_signature(style, graph, db, config.render.signature_weight)
     engine = GraphEngine(style, graph, config.render, fps=config.fps, signature=signature)
-    segments, stats = synthesise(engine, grid, music.duration_s, config, progress, music)
+    segments, stats = synthesise(engine, grid, music.duration_s, config, progress)
     timings["synthesis_s"] = time.perf_counter() - t
 
     local = np.concatenate([s.local_rot for s in segments])

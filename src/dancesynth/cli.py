@@ -106,6 +106,10 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
         done = f", {s['in_range_actual']:.0%} danced" if s.get("in_range_actual") is not None else ""
         warp = f"; beat pieces at {lo:g}-{hi:g}x their captured speed: {s['in_range_expected']:.0%} expected{done}"
     click.echo(f"style     {s['style']}, " + ("on the beat" if level == "beat" else f"at {level}") + warp)
+    if s.get("beats_per_bar"):
+        period = s.get("dance_period_beats")
+        click.echo(f"metre     {s['beats_per_bar']} beats per bar"
+                   + (f"; the dance's energy repeats every {period} beats" if period else ""))
     if s["engine"] == "streaming":
         click.echo(f"engine    streaming: {s['segments']} segment(s) of {s['segment_s']:g} s, "
                    f"{s['transitions']} transitions, median {s['step_s_median'] * 1e3:.1f} ms per segment")

@@ -73,6 +73,9 @@ class BeatGrid:
     intensity_db: np.ndarray    # (G-1,) per interval
     is_music_beat: np.ndarray   # (G,) bool: this grid beat is a detected music beat
     subdivide: float | tuple = 1  # grid beats per music beat, or sections ((first music beat, level), ...)
+    count: np.ndarray | None = None  # (G,) music beats counted at each grid beat (fractions between beats)
+    bar_position: np.ndarray | None = None  # (G,) position in the bar (0 = downbeat; -1: no music beat or
+    beats_per_bar: int | None = None        # the metre unknown) and the bar's length
 
     @property
     def n_intervals(self) -> int:
@@ -112,6 +115,7 @@ def beat_grid(music: MusicFeatures, *, subdivide=1) -> BeatGrid:
     intensity = np.concatenate([np.full(n_before, inten[0]), inten, np.full(n_after, inten[-1])])
     is_beat = np.zeros(len(times), dtype=bool)
     is_beat[n_before:n_before + beats.size] = True
+    extended = times
     if len(plan) == 1 and plan[0][1] >= 1:  # one level, each interval split: the plain case
         sub = int(plan[0][1])
         if sub > 1:
@@ -120,7 +124,8 @@ def beat_grid(music: MusicFeatures, *, subdivide=1) -> BeatGrid:
             times = np.r_[split, times[-1]]
             intensity = np.repeat(intensity, sub)
             is_beat = np.r_[(is_beat[:-1, None] & (frac == 0)[None, :]).ravel(), is_beat[-1:]]
-        return BeatGrid(times, intensity, is_beat, plan[0][1])
+        return BeatGrid(times, intensity, is_beat, plan[0][1], _counts(times, extended),
+                        *_bar_positions(times, music))
 
     # Sections, or a merged level: build each section from the extended beats it covers.
     starts = [0] + [n_before + b for b, _ in plan[1:]]
@@ -151,7 +156,29 @@ def beat_grid(music: MusicFeatures, *, subdivide=1) -> BeatGrid:
     b = min(int(np.searchsorted(times, music.duration_s, side="left")), len(times) - 1) if margin_after \
         else len(times) - 1
     spec = plan[0][1] if len(plan) == 1 else tuple(plan)
-    return BeatGrid(times[a:b + 1], intensity[a:b], is_beat[a:b + 1], spec)
+    times = times[a:b + 1]
+    return BeatGrid(times, intensity[a:b], is_beat[a:b + 1], spec, _counts(times, extended),
+                    *_bar_positions(times, music))
+
+
+def _bar_positions(grid_s: np.ndarray, music: MusicFeatures) -> tuple[np.ndarray, int | None]:
+    """Each grid beat's position in its bar (-1 where it is no music beat or the metre is unknown)."""
+    out = np.full(len(grid_s), -1, dtype=np.int64)
+    if music.beat_in_bar is None:
+        return out, None
+    beats = music.beat_times_s
+    i = np.clip(np.searchsorted(beats, grid_s), 0, len(beats) - 1)
+    for j in (i, np.maximum(i - 1, 0)):  # the grid holds the music's beats as they are, give or take rounding
+        hit = np.abs(beats[j] - grid_s) < 1e-6
+        out[hit] = music.beat_in_bar[j[hit]]
+    return out, music.beats_per_bar
+
+
+def _counts(grid_s: np.ndarray, beats_s: np.ndarray) -> np.ndarray:
+    """Music beats counted at each grid time: ``beats_s`` (every music beat, the song's own
+    and those carried on before and after it) count 0, 1, 2, ...; times between them count
+    the fraction of the beat gone by."""
+    return np.interp(grid_s, beats_s, np.arange(len(beats_s), dtype=np.float64))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -38,16 +38,101 @@ from ..motion.roles import find_roles
 
 @dataclass(frozen=True)
 class Pieces:
-    """K beat-to-beat pieces: music interval [t0, t1) shows source frames [f0, f1]."""
+    """K beat-to-beat pieces: music interval [t0, t1) shows source frames [f0, f1].
+
+    ``count0``/``count1``: the music beats counted at t0 and t1 (``BeatGrid.count``; a piece
+    on a subdivided grid spans half a beat, on a merged one two). None: one beat each.
+    ``ease0``/``ease1``: how much the accent timing (``ease``) slows the motion on the beat
+    at t0 and at t1. None: no easing, each piece at one rate (the paper).
+    """
 
     t0: np.ndarray
     t1: np.ndarray
     f0: np.ndarray
     f1: np.ndarray
     jump: np.ndarray  # the piece starts somewhere else than the previous piece ended
+    count0: np.ndarray | None = None
+    count1: np.ndarray | None = None
+    ease0: np.ndarray | None = None
+    ease1: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t0)
+
+    def timing(self, k) -> tuple:
+        """``(count0, count1, ease0, ease1)`` of pieces ``k``, for ``ease`` and ``ease_rate``."""
+        shape = np.shape(k)
+        c0, c1 = ((np.zeros(shape), np.ones(shape)) if self.count0 is None
+                  else (self.count0[k], self.count1[k]))
+        e0, e1 = ((np.zeros(shape), np.zeros(shape)) if self.ease0 is None
+                  else (self.ease0[k], self.ease1[k]))
+        return c0, c1, e0, e1
+
+
+def ease(u, count0, count1, ease0, ease1):
+    """Accent timing: where within a piece (``u`` = 0..1 of its music time) its source is shown.
+
+    Played linearly, a piece moves as fast on the beat as between beats, and the beat
+    goes by unseen wherever the mocap does not happen to stop there. Eased, the playback
+    rate follows ``1 - a(c) cos(2 pi c)`` of the music's beat count ``c``, normalised so
+    the piece keeps its length: slower on each beat, faster between. The motion settles
+    into every beat and springs out of it -- the accent by speed that Loi & Li give the
+    hands on each beat, what a dancer does when "hitting" the count. ``a`` runs linearly
+    from ``ease0`` at the piece's start to ``ease1`` at its end, so a beat can be hit
+    harder than its neighbours (the bar's "1"). Piece ends stay put: the source beat
+    frames still land exactly on their beats. ``ease0 = ease1 = 0`` is linear.
+    """
+    c, span, total = _eased(u, count0, count1, ease0, ease1)
+    return np.where(span > 0, c / np.where(span > 0, total, 1.0), u)
+
+
+def ease_rate(u, count0, count1, ease0, ease1):
+    """d ease / d u: the playback rate at ``u`` relative to the piece's mean rate."""
+    u = np.asarray(u, dtype=np.float64)
+    c0 = np.asarray(count0, dtype=np.float64)
+    span = np.asarray(count1, dtype=np.float64) - c0
+    local = c0 - np.floor(c0) + span * u
+    amount = ease0 + (np.asarray(ease1, dtype=np.float64) - ease0) * u
+    _, _, total = _eased(1.0, count0, count1, ease0, ease1)
+    return np.where(span > 0, span * (1.0 - amount * np.cos(2 * np.pi * local)) / np.where(span > 0, total, 1.0),
+                    1.0)
+
+
+def beat_ease(n: int, bar_position=None, beats_per_bar: int | None = None, *, amount: float,
+              downbeat: float = 0.0) -> np.ndarray:
+    """How hard ``ease`` hits each of ``n`` grid beats: ``amount``, plus ``downbeat`` on a bar's
+    first beat and minus ``downbeat / (beats_per_bar - 1)`` on its others (a bar keeps its
+    mean), so the "1" is the bar's strongest accent. Beats of unknown position get ``amount``."""
+    out = np.full(n, float(amount))
+    if bar_position is None or not beats_per_bar or beats_per_bar < 2 or downbeat == 0:
+        return out
+    pos = np.asarray(bar_position)
+    out[pos == 0] += downbeat
+    out[pos > 0] -= downbeat / (beats_per_bar - 1)
+    return np.maximum(out, 0.0)
+
+
+def _eased(u, count0, count1, ease0, ease1):
+    """``(F(u), span, F(1))`` with ``F(u) = integral of 1 - a(c) cos(2 pi c) dc`` from the piece's start,
+    in beats counted from the start's whole beat (the wave repeats every beat)."""
+    u = np.asarray(u, dtype=np.float64)
+    c0 = np.asarray(count0, dtype=np.float64)
+    span = np.asarray(count1, dtype=np.float64) - c0
+    safe = np.where(span > 0, span, 1.0)
+    start = c0 - np.floor(c0)
+    slope = (np.asarray(ease1, dtype=np.float64) - ease0) / safe  # a(c) = base + slope * c, locally
+    base = ease0 - slope * start
+
+    def at(x):  # x minus the integral of (base + slope c) cos(2 pi c) dc, from start to x
+        return x - start - (_wave_integral(x, base, slope) - _wave_integral(start, base, slope))
+
+    return at(start + span * u), span, at(start + span)
+
+
+def _wave_integral(x, base, slope):
+    """Integral of ``(base + slope c) cos(2 pi c) dc`` from 0 to ``x``."""
+    w = 2 * np.pi * x
+    return base * np.sin(w) / (2 * np.pi) + slope * (x * np.sin(w) / (2 * np.pi) + (np.cos(w) - 1) / (4 * np.pi ** 2))
 
 
 #: Fastest angular acceleration an inertialization decay may add (rad/s^2): about what
@@ -152,6 +237,7 @@ class StitchState:
     last_f1: float | None = None
     last_t0: float | None = None
     last_t1: float | None = None
+    last_end_rate: float = 1.0       # its playback rate at its end, relative to its mean (``ease_rate``)
 
 
 def _place(style: Style, frames, yaw: float, offset: np.ndarray):
@@ -203,7 +289,7 @@ def _jump_blend(style, state: StitchState, f_new: float, rate_new: float, yaw, o
     dt = 1.0 / fps
     t_new = np.ceil(t0 * fps - 1e-9) / fps + np.array([0.0, dt])   # a frame at t0 shows the new piece
     t_old = t_new[0] - np.array([2 * dt, dt])
-    rate_old = (state.last_f1 - state.last_f0) / (state.last_t1 - state.last_t0)
+    rate_old = (state.last_f1 - state.last_f0) / (state.last_t1 - state.last_t0) * state.last_end_rate
     old, old_root = _shown(style, state.last_f1, rate_old, t0, t_old, state.yaw, state.offset, state.blend)
     new, new_root = _shown(style, f_new, rate_new, t0, t_new, yaw, offset, None)
     w_old = rot.log(rot.mul(old[1], rot.inv(old[0]))) / dt
@@ -281,11 +367,13 @@ def render(style: Style, pieces: Pieces, state: StitchState, *, fps: float, end_
             st = replace(st, yaw=yaw, offset=offset)
         elif pieces.jump[k]:
             yaw, offset = _aligned_placement(style, st, f0, t0)
-            blend = _jump_blend(style, st, f0, (f1 - f0) / (t1 - t0), yaw, offset, t0, blend_s, fps)
+            rate = (f1 - f0) / (t1 - t0) * float(ease_rate(0.0, *pieces.timing(k)))
+            blend = _jump_blend(style, st, f0, rate, yaw, offset, t0, blend_s, fps)
             st = replace(st, yaw=yaw, offset=offset, blend=blend)
             blends.append((t0, blend))
         yaws[k], offsets[k] = st.yaw, st.offset
-        st = replace(st, last_f0=f0, last_f1=f1, last_t0=t0, last_t1=t1)
+        st = replace(st, last_f0=f0, last_f1=f1, last_t0=t0, last_t1=t1,
+                     last_end_rate=float(ease_rate(1.0, *pieces.timing(k))))
 
     # Output frames in this call's time range.
     last = int(np.floor(end_s * fps + 1e-9))
@@ -295,6 +383,7 @@ def render(style: Style, pieces: Pieces, state: StitchState, *, fps: float, end_
     t = idx / fps
     k = np.clip(np.searchsorted(pieces.t1, t, side="right"), 0, k_pieces - 1)
     u = (t - pieces.t0[k]) / (pieces.t1[k] - pieces.t0[k])
+    u = ease(u, *pieces.timing(k))
     src = pieces.f0[k] + u * (pieces.f1[k] - pieces.f0[k])
     clip = style.clip_of_frame(pieces.f0.astype(np.int64))[k]
     src = np.clip(src, style.clip_starts[clip], style.clip_starts[clip + 1] - 1)

@@ -32,7 +32,9 @@ TITLES = {"streaming": "streaming", "signature": "+signature", "global": "global
 KEYS = ("accent_precision", "accent_precision_chance", "accent_precision_x_chance", "accent_recall",
         "accent_recall_chance", "accent_recall_x_chance", "downbeat_recall", "downbeat_recall_chance",
         "bar_accent_on_downbeat", "bar_accent_chance", "warp_in_range", "intensity_spearman",
-        "transition_jump_vs_mocap_p99", "jump_p99_vs_mocap", "foot_skate_m_s", "pfc", "one_frame_steps")
+        "transition_jump_vs_mocap_p99", "worst_transition_jump_vs_mocap_p99", "jump_p99_vs_mocap",
+        "joint_speed_p99_vs_mocap", "root_travel_vs_mocap", "foot_skate_m_s", "foot_skate_vs_mocap", "pfc",
+        "pfc_vs_mocap", "one_frame_steps")
 LABELS = {"accent_precision": "precision: kinematic beats on a beat (±50 ms)",
           "accent_precision_chance": "  chance (circular shift)", "accent_precision_x_chance": "  × chance",
           "accent_recall": "recall: beats with a kinematic beat (±50 ms)",
@@ -43,8 +45,13 @@ LABELS = {"accent_precision": "precision: kinematic beats on a beat (±50 ms)",
           "warp_in_range": "beat pieces played at rate 0.8-1.25",
           "intensity_spearman": "Spearman(loudness, kinetic energy)",
           "transition_jump_vs_mocap_p99": "largest transition jump / mocap p99",
+          "worst_transition_jump_vs_mocap_p99": "  the worst song's",
+          "joint_speed_p99_vs_mocap": "p99 joint speed / mocap's (guard ±25 %)",
+          "root_travel_vs_mocap": "root travel / mocap's (guard ±25 %)",
           "jump_p99_vs_mocap": "p99 frame jump / mocap's", "foot_skate_m_s": "foot speed on the floor, m/s",
           "pfc": "foot contact score PFC (EDGE)",
+          "foot_skate_vs_mocap": "  / the style's mocap's (guard ≤ 1.1)",
+          "pfc_vs_mocap": "  / the style's mocap's (guard ≤ 1.1)",
           "one_frame_steps": "one-frame joint steps > 30° not in the source (total)"}
 MOCAP_NOTE = ("* mocap: each clip of the styles danced, against its own motion beats (no music, no bars, "
               "no loudness, no transitions); its one-frame steps are its own capture glitches, per clip")
@@ -161,6 +168,8 @@ def summarise(per_song: list[dict], mocap: dict, engines) -> dict:
             m["waltz_period_3"] = (float(np.mean([r.get("energy_period_beats") == 3 for r in three]))
                                    if three else None)
             m["one_frame_steps"] = int(sum(r.get("one_frame_steps") or 0 for r in scored))
+            worst = [r["transition_jump_vs_mocap_p99"] for r in scored if r.get("transition_jump_vs_mocap_p99")]
+            m["worst_transition_jump_vs_mocap_p99"] = max(worst) if worst else None
             table_[e] = m
         out[subset] = table_
     out["mocap"] = mean_scores(list(mocap.values())) if mocap else {}

@@ -94,9 +94,15 @@ METRICS: dict[str, MetricInfo] = {
     "mocap_jump_p99_deg_s": _m("mocap 99th-percentile jump (at this fps)", "deg/s", "info", "smoothness"),
     "jump_p99_vs_mocap": _m("99th-percentile jump / mocap's", "", "≈1", "smoothness"),
     "jerk_m_s3": _m("mean joint jerk", "m/s³", "≈mocap", "smoothness"),
+    "joint_speed_p99_m_s": _m("99th-percentile joint speed", "m/s", "≈mocap", "smoothness"),
+    "joint_speed_p99_vs_mocap": _m("99th-percentile joint speed / mocap's", "", "≈1", "smoothness"),
+    "root_travel_m_s": _m("mean root speed across the floor", "m/s", "≈mocap", "smoothness"),
+    "root_travel_vs_mocap": _m("mean root speed across the floor / mocap's", "", "≈1", "smoothness"),
     "jerk_vs_mocap": _m("mean jerk / mocap's", "", "≈1", "smoothness"),
     "foot_skate_m_s": _m("foot speed while on the floor", "m/s", "lower", "contact"),
     "pfc": _m("Physical Foot Contact score (EDGE)", "", "lower", "contact"),
+    "foot_skate_vs_mocap": _m("foot speed on the floor / the style's mocap's", "", "≤1.1", "contact"),
+    "pfc_vs_mocap": _m("PFC / the style's mocap's", "", "≤1.1", "contact"),
     "ground_penetration_m": _m("mean depth of the lowest foot below the floor", "m", "lower", "contact"),
     "ground_penetration_max_m": _m("largest depth below the floor", "m", "lower", "contact"),
     "warp_median_abs_log2": _m("median |log2 time-warp rate|", "", "lower", "time warp"),
@@ -165,6 +171,9 @@ def evaluate(motion: MotionClip, *, music_beats_s=None, music_loudness_db=None, 
         if at_transitions.size:
             out["max_transition_jump_deg_s"] = float(at_transitions.max())
     out["jerk_m_s3"] = mm.mean_jerk(motion, global_pos=g_pos)
+    if motion.n_frames >= 2:
+        out["joint_speed_p99_m_s"] = float(np.percentile(mm.joint_speeds(motion, global_pos=g_pos), 99))
+        out["root_travel_m_s"] = mm.root_travel_speed(motion)
 
     try:
         feet = mm.feet_of(motion, global_rot=g_rot, global_pos=g_pos)
@@ -258,13 +267,19 @@ class MocapReference:
 
     ``jumps_deg_s``: the per-frame angular-velocity jumps of every clip's interior
     frames, pooled (each clip on its own: never across a seam between clips);
-    ``jerk_m_s3``: the mean jerk over all clips' frames (NaN when no clip has 4 frames).
+    ``jerk_m_s3``: the mean jerk over all clips' frames (NaN when no clip has 4 frames);
+    ``joint_speed_p99_m_s`` and ``root_travel_m_s``: joint speed and root travel, pooled over clips;
+    ``foot_skate_m_s`` and ``pfc``: the clips' foot skating, frame-weighted means (NaN without legs).
     """
 
     fps: float
     jumps_deg_s: np.ndarray
     jerk_m_s3: float
     n_clips: int
+    joint_speed_p99_m_s: float = float("nan")
+    root_travel_m_s: float = float("nan")
+    foot_skate_m_s: float = float("nan")
+    pfc: float = float("nan")
 
 
 def mocap_reference(mocap: Sequence[MotionClip], fps: float) -> MocapReference:
@@ -275,20 +290,39 @@ def mocap_reference(mocap: Sequence[MotionClip], fps: float) -> MocapReference:
     """
     if not fps > 0:
         raise InputError(f"fps must be positive, got {fps!r}")
-    jumps, jerk_sum, jerk_n = [], 0.0, 0
+    jumps, speeds, jerk_sum, jerk_n, travel, travel_n = [], [], 0.0, 0, 0.0, 0
+    feet = []  # (skate, pfc, frames) per clip with legs
     for i, clip in enumerate(mocap):
         clip = _at_fps(mm.check_motion(clip, f"mocap[{i}]"), fps)
         jumps.append(mm.angular_velocity_jumps(clip)[1:-1])
+        if clip.n_frames >= 2:
+            speeds.append(mm.joint_speeds(clip).ravel())
+            travel += mm.root_travel_speed(clip) * (clip.n_frames - 1)
+            travel_n += clip.n_frames - 1
+            try:
+                feet.append((mm.foot_skate(clip), mm.pfc(clip), clip.n_frames))
+            except ModelError:
+                pass  # no recognisable legs
         if clip.n_frames >= 4:
             jerk_sum += mm.mean_jerk(clip) * (clip.n_frames - 3)
             jerk_n += clip.n_frames - 3
+    nan = float("nan")
+    feet = np.array([f for f in feet if np.isfinite(f[0]) and np.isfinite(f[1])]).reshape(-1, 3)
+    skate, pfc = ((np.average(feet[:, 0], weights=feet[:, 2]), np.average(feet[:, 1], weights=feet[:, 2]))
+                  if len(feet) else (nan, nan))
     return MocapReference(float(fps), np.concatenate(jumps) if jumps else np.zeros(0),
-                          jerk_sum / jerk_n if jerk_n else float("nan"), len(jumps))
+                          jerk_sum / jerk_n if jerk_n else nan, len(jumps),
+                          float(np.percentile(np.concatenate(speeds), 99)) if speeds else nan,
+                          travel / travel_n if travel_n else nan, float(skate), float(pfc))
 
 
 def _mocap_comparison(ref: MocapReference, out: dict, at_transitions: np.ndarray) -> dict:
     """The ``*mocap*`` keys: the motion's jumps and jerk against its source clips' own."""
-    res = {"jerk_vs_mocap": _ratio(out["jerk_m_s3"], ref.jerk_m_s3)}
+    res = {"jerk_vs_mocap": _ratio(out["jerk_m_s3"], ref.jerk_m_s3),
+           "joint_speed_p99_vs_mocap": _ratio(out["joint_speed_p99_m_s"], ref.joint_speed_p99_m_s),
+           "root_travel_vs_mocap": _ratio(out["root_travel_m_s"], ref.root_travel_m_s),
+           "foot_skate_vs_mocap": _ratio(out["foot_skate_m_s"], ref.foot_skate_m_s),
+           "pfc_vs_mocap": _ratio(out["pfc"], ref.pfc)}
     if ref.jumps_deg_s.size:
         p99 = float(np.percentile(ref.jumps_deg_s, 99))
         res["mocap_jump_p99_deg_s"] = p99

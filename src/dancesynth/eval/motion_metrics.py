@@ -261,6 +261,26 @@ def mean_jerk(motion: MotionClip, *, global_pos=None) -> float:
     return float(np.mean(np.linalg.norm(jerk, axis=-1)))
 
 
+def joint_speeds(motion: MotionClip, *, global_pos=None) -> np.ndarray:
+    """Linear speed of every joint between consecutive frames (m/s), (F-1, J).
+
+    Its upper percentiles say how fast the dance moves: a dance retimed onto the beats
+    must not get much faster or slower than the mocap it came from.
+    """
+    check_motion(motion)
+    p = _positions(motion, global_pos)
+    return np.linalg.norm(np.diff(p, axis=0), axis=-1) * motion.fps
+
+
+def root_travel_speed(motion: MotionClip) -> float:
+    """Mean speed of the root across the floor (m/s): how much the dance travels. NaN below 2 frames."""
+    check_motion(motion)
+    if motion.n_frames < 2:
+        return _NAN
+    step = np.diff(np.asarray(motion.root_pos, dtype=np.float64)[:, [0, 2]], axis=0)
+    return float(np.mean(np.linalg.norm(step, axis=-1)) * motion.fps)
+
+
 # ---------------------------------------------------------------------------------------------
 # Feet and floor
 

@@ -49,6 +49,14 @@ class AccentCosts:
     offbeat: float = 1.0
     warp: float = 6.0
     free_warp: float = 0.1
+    far_warp: float = 0.0        # and this much more per unit of |ln rate| beyond ``warp_limit``
+    warp_limit: float = 0.223    # ln 1.25: past 0.8x-1.25x a piece no longer looks like itself
+
+    def warp_cost(self, log_rate: np.ndarray) -> np.ndarray:
+        """The cost of playing pieces at ``exp(log_rate)`` times their captured speed."""
+        off = np.abs(log_rate)
+        return (self.warp * np.maximum(off - self.free_warp, 0.0)
+                + self.far_warp * np.maximum(off - self.warp_limit, 0.0))
 
     def beat_costs(self, strength: np.ndarray, offbeat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per beat: the cost of arriving at it, and of playing the piece from it to the next."""

@@ -27,11 +27,12 @@ from .mixer import Mix, MixerConfig, mix, substitute_motifs, word_bank
 _BANKS: dict = {}  # (style, model) -> WordBank: cutting and embedding a style's words takes seconds
 
 
-def style_bank(style: Style, model):
-    key = (style.name, style.fingerprint, style.n_frames, model.k, hash(np.asarray(model.centroids).tobytes()))
+def style_bank(style: Style, model, accent_window: float = 0.0):
+    key = (style.name, style.fingerprint, style.n_frames, model.k, hash(np.asarray(model.centroids).tobytes()),
+           accent_window)
     if key not in _BANKS:
         _BANKS.clear()  # one at a time: a bank holds every word of a style
-        _BANKS[key] = word_bank(style, model)
+        _BANKS[key] = word_bank(style, model, accent_window)
     return _BANKS[key]
 
 
@@ -100,7 +101,7 @@ def choreography_dance(music: MusicFeatures, db: MotionDatabase, config, *, song
                    else (float(c[0]), parse_motif_id(str(c[1]), model.k)) for c in config.motif_at]
     fit = _choose(db, music, config.style, ref)
     style, subdivide = fit.style, fit.subdivide
-    bank = style_bank(style, model)
+    bank = style_bank(style, model, mixer.accent_window)
     timings["graph_s"] = time.perf_counter() - t  # the motif stage takes the graph's place
 
     t = time.perf_counter()
@@ -115,7 +116,8 @@ def choreography_dance(music: MusicFeatures, db: MotionDatabase, config, *, song
     else:
         plan = plan_motifs(n, model.templates[style.genre], model.transitions[style.genre], rng, fixed=fixed)
     danced = substitute_motifs(bank, model.centroids)[plan]
-    result = mix(style, bank, danced, grid.times_s, music.duration_s, fps=config.fps, rng=rng, config=mixer)
+    result = mix(style, bank, danced, grid.times_s, music.duration_s, fps=config.fps, rng=rng, config=mixer,
+                 beat_count=grid.count, bar_position=grid.bar_position, beats_per_bar=grid.beats_per_bar)
     timings["synthesis_s"] = time.perf_counter() - t
     clip = _clip(style, music, grid, result, plan, fixed, subdivide, model, song=song, config=config,
                  timings=timings, ref=ref)

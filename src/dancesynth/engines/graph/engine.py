@@ -19,15 +19,16 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
 from ...motion.database import Style
 from ...motion.roles import find_roles
 from ..footlock import FootLockState, lock_feet
-from ..stitch import Pieces, Rendered, StitchState, render
+from ..stitch import Pieces, Rendered, StitchState, beat_ease, render
 from .meta_graph import MetaMotionGraph
-from .search import AccentCosts, Path, search
+from .search import AccentCosts, Path, StepCosts, search
 from .signature import DEFAULT_WEIGHT, SignatureTarget
 
 
@@ -41,7 +42,8 @@ class MusicSegment:
     (K+1,), when the metre is known, is the position of each beat in its bar (0 = the
     downbeat, -1 = unknown) and ``beats_per_bar`` the bar's length. ``music_beat``
     (K+1,) says which beats are the music's (False: a subdivision, when a slow song is
-    danced at double time).
+    danced at double time). ``beat_count`` (K+1,) counts the music's beats at each of
+    them (``BeatGrid.count``; None: each is one music beat), for the accent timing.
     """
 
     beat_times_s: np.ndarray
@@ -51,6 +53,7 @@ class MusicSegment:
     bar_position: np.ndarray | None = None
     beats_per_bar: int | None = None
     music_beat: np.ndarray | None = None
+    beat_count: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -65,11 +68,19 @@ class EngineConfig:
     bar_accent: float = 0.5           # ask for this much more intensity (z units) on each bar's first beat,
                                       # less on the others: the big moves start on the "1" (0 = paper)
     downbeat_stop: float = 0.5        # on a bar's first beat, a stop of strength s costs s x this less
+    ease_beats: float = 0.3           # accent timing: play slower on each music beat, faster between
+                                      # (stitch.ease; 0 = the paper's constant rate per piece)
+    ease_downbeat: float = 0.3        # ... and this much harder on each bar's first beat
 
     @classmethod
     def paper(cls) -> "EngineConfig":
         """The objective of eq. (4)-(9) alone: no repeat penalty, no jump cost, no accent costs."""
-        return cls(repeat_penalty=0.0, jump_cost=0.0, accent=None, bar_accent=0.0, downbeat_stop=0.0)
+        return cls(repeat_penalty=0.0, jump_cost=0.0, accent=None, bar_accent=0.0, downbeat_stop=0.0,
+                   ease_beats=0.0, ease_downbeat=0.0)
+
+    def beat_ease(self, n: int, bar_position, beats_per_bar) -> np.ndarray:
+        """The accent timing of each of ``n`` beats (``stitch.beat_ease``)."""
+        return beat_ease(n, bar_position, beats_per_bar, amount=self.ease_beats, downbeat=self.ease_downbeat)
 
 
 @dataclass(frozen=True)
@@ -130,10 +141,15 @@ def standardise(values: np.ndarray, mean: float, std: float) -> np.ndarray:
     return (values - mean) / std if std > 1e-9 else np.zeros_like(values)
 
 
-def pieces_from_path(graph: MetaMotionGraph, path: Path, beat_times_s: np.ndarray) -> Pieces:
+def pieces_from_path(graph: MetaMotionGraph, path: Path, beat_times_s: np.ndarray,
+                     beat_count: np.ndarray | None = None, ease: np.ndarray | None = None) -> Pieces:
+    """The path's beat pieces; ``beat_count`` and ``ease`` (K+1,) per beat as in ``Pieces``."""
     f0 = graph.render_frame[path.via].astype(np.float64)
     f1 = graph.render_frame[path.nodes[1:]].astype(np.float64)
-    return Pieces(beat_times_s[:-1].astype(float), beat_times_s[1:].astype(float), f0, f1, path.jump.copy())
+    count = None if beat_count is None else np.asarray(beat_count, dtype=np.float64)
+    return Pieces(beat_times_s[:-1].astype(float), beat_times_s[1:].astype(float), f0, f1, path.jump.copy(),
+                  None if count is None else count[:-1], None if count is None else count[1:],
+                  None if ease is None else ease[:-1], None if ease is None else ease[1:])
 
 
 @dataclass(frozen=True)
@@ -185,17 +201,17 @@ class GraphEngine:
                                                             segment.beats_per_bar, self.config.bar_accent)
         path = search(self.graph, target, np.diff(beats), start_nodes=start,
                       prev_duration_s=state.prev_duration_s, thc=thc, node_penalty=penalty,
-                      jump_cost=self.config.jump_cost, accent=self.config.accent,
-                      **self._beat_costs(bars, segment.music_beat))
+                      steps=self.steps, **self._beat_costs(bars, segment.music_beat))
         decay = 0.5 ** (1.0 / self.config.repeat_half_life_beats)
         recent = recent * decay ** len(inten)
         np.add.at(recent, path.nodes[1:], decay ** np.arange(len(inten) - 1, -1, -1))
         t1 = time.perf_counter()
-        pieces = pieces_from_path(self.graph, path, beats)
+        pieces = pieces_from_path(self.graph, path, beats, segment.beat_count,
+                                  self.config.beat_ease(len(beats), bars, segment.beats_per_bar))
         last = segment.end_s is not None
         stitch, frames = render(
-            self.style, pieces, state.stitch, fps=self.fps,
-            end_s=segment.end_s if last else float(beats[-1]), blend_s=self.config.blend_s, inclusive_end=last)
+            self.style, pieces, state.stitch, fps=self.fps, end_s=segment.end_s if last else float(beats[-1]),
+            blend_s=self.config.blend_s, inclusive_end=last)
         local, feet = self._lock_feet(frames, state.feet)
         new_state = replace(state, node=int(path.nodes[-1]), prev_duration_s=float(beats[-1] - beats[-2]),
                             n_heard=n, mean_db=mean, m2_db=m2, stitch=stitch, segments=state.segments + 1,
@@ -206,10 +222,11 @@ class GraphEngine:
 
     def run_global(self, beat_times_s: np.ndarray, intensity_db: np.ndarray, end_s: float,
                    seed: int | None = None, bar_position: np.ndarray | None = None,
-                   beats_per_bar: int | None = None, music_beat: np.ndarray | None = None) -> SegmentFrames:
+                   beats_per_bar: int | None = None, music_beat: np.ndarray | None = None,
+                   beat_count: np.ndarray | None = None) -> SegmentFrames:
         """The global-DP baseline: one search over the whole song, then one render.
 
-        ``bar_position``, ``beats_per_bar`` and ``music_beat`` as in ``MusicSegment``."""
+        ``bar_position``, ``beats_per_bar``, ``music_beat`` and ``beat_count`` as in ``MusicSegment``."""
         inten = np.asarray(intensity_db, dtype=np.float64)
         state = self.initial_state(seed, needed_beats=len(inten))
         t0 = time.perf_counter()
@@ -218,14 +235,20 @@ class GraphEngine:
         target = standardise(inten, inten.mean(), inten.std()) + bar_shape(
             None if bar_position is None else bar_position[:-1], beats_per_bar, self.config.bar_accent)
         path = search(self.graph, target, np.diff(beat_times_s),
-                      start_nodes=state.start_nodes, thc=0.0, jump_cost=self.config.jump_cost,
-                      accent=self.config.accent, **self._beat_costs(bar_position, music_beat))
+                      start_nodes=state.start_nodes, thc=0.0, steps=self.steps,
+                      **self._beat_costs(bar_position, music_beat))
         t1 = time.perf_counter()
-        pieces = pieces_from_path(self.graph, path, np.asarray(beat_times_s, dtype=np.float64))
-        _, frames = render(self.style, pieces, state.stitch, fps=self.fps,
-                           end_s=end_s, blend_s=self.config.blend_s, inclusive_end=True)
+        pieces = pieces_from_path(self.graph, path, np.asarray(beat_times_s, dtype=np.float64), beat_count,
+                                  self.config.beat_ease(len(beat_times_s), bar_position, beats_per_bar))
+        _, frames = render(self.style, pieces, state.stitch, fps=self.fps, end_s=end_s, blend_s=self.config.blend_s,
+                           inclusive_end=True)
         local, _ = self._lock_feet(frames, state.feet)
         return SegmentFrames.of(frames, local, path, pieces, t1 - t0, time.perf_counter() - t1, self.signature)
+
+    @cached_property
+    def steps(self) -> StepCosts:
+        """The graph's step costs under this configuration, shared by every search."""
+        return StepCosts(self.graph, self.config.jump_cost, self.config.accent)
 
     def _beat_costs(self, bar_position: np.ndarray | None, music_beat: np.ndarray | None) -> dict:
         """``search``'s per-beat costs: a clear stop is worth more on a bar's first beat, and

@@ -50,8 +50,10 @@ class GraphConfig:
                                            # hold capture glitches (wrist flips) and are not played
     prune_trap_cycles: bool = True  # drop steps into small cycles the main cycle cannot be reached
                                     # from (a dance that enters one loops there forever; see derive_steps)
-    accent_window: float = 0.35     # render each beat at its most visible stop within this fraction of a
-                                    # beat (motion.accents; 0 = the motion beats themselves, the paper)
+    accent_window: float = 0.0      # render each beat at its most visible stop within this fraction of a
+                                    # beat (motion.accents; 0 = the motion beats themselves, the paper).
+                                    # Off: with the renderer's accent timing (stitch.ease) it added no
+                                    # accents, and its uneven pieces cost playback rates and transitions.
 
     @classmethod
     def paper(cls) -> "GraphConfig":
@@ -230,28 +232,36 @@ def build_graph(style: Style, config: GraphConfig = GraphConfig()) -> MetaMotion
     frames = np.asarray(style.beat_frames, dtype=np.int64)
     clip = style.clip_of_frame(frames)
     n = len(frames)
+    # Everything below is measured where the dance is cut and shown: at each beat's visible stop
+    # (the beat frame itself when accent_window is 0).
+    accents = cached_accent_beats(style, window=config.accent_window)
+    shown = np.asarray(accents.frame, dtype=np.int64)
     same_next = np.r_[clip[1:] == clip[:-1], False]
     if n > 1 and np.isfinite(config.max_joint_speed_deg_s):
         glitch = np.r_[rotation_glitches(style, config.max_joint_speed_deg_s), False]
         cum_glitch = np.concatenate([[0], np.cumsum(glitch)])
-        same_next[:-1] &= cum_glitch[frames[1:]] == cum_glitch[frames[:-1]]
+        same_next[:-1] &= cum_glitch[shown[1:]] == cum_glitch[shown[:-1]]
     next_node = np.where(same_next, np.arange(n) + 1, -1)
     prev_node = np.full(n, -1)
     prev_node[next_node[next_node >= 0]] = np.flatnonzero(next_node >= 0)
 
     # Mono-directional edges: total kinetic energy between successive beats (J*s), as rendered:
     # from one visible stop to the next.
-    accents = cached_accent_beats(style, window=config.accent_window)
     cum = np.concatenate([[0.0], np.cumsum(style.energy, dtype=np.float64)])
     w1 = np.full(n, np.nan)
     has = next_node >= 0
-    w1[has] = (cum[accents.frame[next_node[has]]] - cum[accents.frame[has]]) / style.fps
+    w1[has] = (cum[shown[next_node[has]]] - cum[shown[has]]) / style.fps
+    # What the search matches with the music is the energy a viewer sees on the beat. A piece of L
+    # source seconds played in a beat of d seconds shows w1 * L / d (speeds scale by L / d, time by
+    # d / L); d is the music's and the same for every node, so nodes rank by w1 * L. (The paper's
+    # pieces all last about a beat; pieces between visible stops vary more.)
+    shown_w1 = w1 * (np.r_[shown[1:] - shown[:-1], 0] / style.fps)
     w1_z = np.zeros(n)
-    if has.sum() > 1 and np.std(w1[has]) > 0:
-        w1_z[has] = (w1[has] - w1[has].mean()) / w1[has].std()
+    if has.sum() > 1 and np.std(shown_w1[has]) > 0:
+        w1_z[has] = (shown_w1[has] - shown_w1[has].mean()) / shown_w1[has].std()
 
     # Bi-directional edges, eq. (1)-(3), a block of rows at a time.
-    rd_rows = _SimilarityRows(style, frames, clip, config)
+    rd_rows = _SimilarityRows(style, shown, clip, config)
     src_l, dst_l, rd_l = [], [], []
     block = rd_rows.block_rows()
     m = config.max_jumps_per_beat

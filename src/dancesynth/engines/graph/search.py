@@ -57,7 +57,7 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
            start_nodes: np.ndarray, prev_duration_s: float | None = None, thc: float = np.inf,
            node_penalty: np.ndarray | None = None, jump_cost: float = 0.0,
            accent: AccentCosts | None = None, beat_class: np.ndarray | None = None,
-           class_cost: np.ndarray | None = None) -> Path:
+           class_cost: np.ndarray | None = None, steps: "StepCosts | None" = None) -> Path:
     """Best path for K beat intervals (eq. 7-9).
 
     ``intensity_z`` (K,) are the normalised music intensities, ``durations_s`` (K,)
@@ -69,13 +69,19 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     exactly the music's intensity is free). ``accent`` adds the costs of ``AccentCosts``
     where the graph knows its accents. ``class_cost`` (C, N) is added on arriving at a node
     on beat ``k`` (0..K) of class ``beat_class[k]`` (-1: none), e.g. the downbeats.
+    ``steps``: the graph's ``StepCosts`` for this ``jump_cost`` and ``accent``, built once and
+    reused across segments (built here when not given).
     """
     intensity_z = np.asarray(intensity_z, dtype=np.float64)
     durations_s = np.asarray(durations_s, dtype=np.float64)
     n, k_steps = graph.n_nodes, len(intensity_z)
     costs = np.full((k_steps + 1, n), np.inf)
     costs[0, np.asarray(start_nodes)] = 0.0
-    steps = _Steps(graph, node_penalty, jump_cost, accent)
+    if steps is None:
+        steps = StepCosts(graph, jump_cost, accent)
+    # Costs that depend only on the node arrived at are added after the minimum over the ways
+    # in: the same result, fewer operations, and backtracking is unaffected.
+    penalty = None if node_penalty is None else np.asarray(node_penalty, dtype=np.float64)
     prev = np.r_[np.nan if prev_duration_s is None else prev_duration_s, durations_s[:-1]]
 
     for k in range(k_steps):
@@ -87,8 +93,10 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
         if steps.j_nodes.size:
             best = np.minimum.reduceat(steps.jump(costs[k], dev, prev[k], durations_s[k]), steps.j_starts)
             row[steps.j_nodes] = np.minimum(row[steps.j_nodes], best)
+        if penalty is not None:
+            row += penalty
         if beat_class is not None and beat_class[k + 1] >= 0:
-            row += class_cost[beat_class[k + 1]]  # the same for every way in: backtracking is unaffected
+            row += class_cost[beat_class[k + 1]]
 
     ok = (graph.capacity >= thc) & np.isfinite(costs[k_steps])
     if not ok.any():
@@ -118,24 +126,26 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     return Path(nodes, vias, jumped, float(costs[k_steps][end]))
 
 
-class _Steps:
+class StepCosts:
     """The graph's steps split into mono steps and jumps, with their cost terms.
 
     Forward pass and backtracking evaluate costs through the same two methods, so the
-    step chosen when backtracking reproduces the forward minimum exactly.
+    step chosen when backtracking reproduces the forward minimum exactly. The terms that
+    depend only on the beat's length (time warp, eq. 6's rate factor) are computed once
+    per distinct length and kept: a song's beat grid has few of them.
     """
 
-    def __init__(self, graph: MetaMotionGraph, node_penalty, jump_cost: float, accent: AccentCosts | None = None):
+    _KEEP = 256  # distinct beat lengths (or length ratios) remembered
+
+    def __init__(self, graph: MetaMotionGraph, jump_cost: float = 0.0, accent: AccentCosts | None = None):
         jump = graph.step_jump
         m, j = np.flatnonzero(~jump), np.flatnonzero(jump)
-        arrive = (np.zeros(graph.n_nodes) if node_penalty is None
-                  else np.asarray(node_penalty, dtype=np.float64))
+        arrive = np.zeros(graph.n_nodes)
         played = np.zeros(graph.n_nodes)  # cost of playing the mono edge leaving a node
         self.warp = None
         if accent is not None and graph.node_accent is not None:
-            arrive_cost, played = accent.beat_costs(graph.node_accent, graph.edge_offbeat)
-            arrive = arrive + arrive_cost
-            self.warp, self.free_warp = accent.warp, accent.free_warp
+            arrive, played = accent.beat_costs(graph.node_accent, graph.edge_offbeat)
+            self.warp = accent.warp_cost
             self.log_s = np.log(np.maximum(graph.frames_to_next(), 1.0) / graph.fps)  # seconds each edge plays
         self.m_src, self.m_dst = graph.step_src[m], graph.step_dst[m]
         self.m_add = arrive[self.m_dst] + played[self.m_src]
@@ -152,23 +162,40 @@ class _Steps:
         self.j_last = np.zeros(graph.n_nodes, dtype=np.int64)
         self.j_first[self.j_nodes] = self.j_starts
         self.j_last[self.j_nodes] = np.r_[self.j_starts[1:], len(self.j_dst)]
+        self._fixed: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self._factor: dict[float, np.ndarray] = {}
 
-    def _warp(self, edge_nodes, duration):
-        if self.warp is None:
-            return 0.0
-        over = np.abs(self.log_s[edge_nodes] - np.log(duration)) - self.free_warp
-        return self.warp * np.maximum(over, 0.0)
+    def _fixed_terms(self, duration: float) -> tuple[np.ndarray, np.ndarray]:
+        """Per mono step and per jump: the static costs plus the time warp of a beat this long."""
+        got = self._fixed.get(duration)
+        if got is None:
+            if len(self._fixed) >= self._KEEP:
+                self._fixed.clear()
+            warp = np.zeros(len(self.mono_into))
+            if self.warp is not None:
+                warp = self.warp(self.log_s - np.log(duration))
+            got = self._fixed[duration] = (self.m_add + warp[self.m_src], self.j_add + warp[self.j_via])
+        return got
+
+    def _rate_factors(self, prev_duration, duration) -> np.ndarray:
+        """Eq. (6)'s s times the jump's w2, per jump."""
+        ratio = duration / prev_duration if prev_duration is not None and prev_duration > 0 else np.nan
+        key = -1.0 if not np.isfinite(ratio) else float(ratio)
+        got = self._factor.get(key)
+        if got is None:
+            if len(self._factor) >= self._KEEP:
+                self._factor.clear()
+            got = self._factor[key] = _rate_factor(self.j_rho, None if key < 0 else 1.0, key) * self.j_w2
+        return got
 
     def mono(self, prev_cost, dev, duration, sel=slice(None)):
         """Cost of arriving by mono steps ``sel``: eq. (4), first case."""
-        src = self.m_src[sel]
-        return prev_cost[src] + (dev[src] + self.m_add[sel] + self._warp(src, duration))
+        return (prev_cost + dev)[self.m_src[sel]] + self._fixed_terms(duration)[0][sel]
 
     def jump(self, prev_cost, dev, prev_duration, duration, sel=slice(None)):
         """Cost of arriving by jumps ``sel`` and their mono edge: eq. (4), second case."""
-        factor = _rate_factor(self.j_rho[sel], prev_duration, duration) * self.j_w2[sel]
-        via = self.j_via[sel]
-        return prev_cost[self.j_src[sel]] + (dev[via] * factor + self.j_add[sel] + self._warp(via, duration))
+        return prev_cost[self.j_src[sel]] + (dev[self.j_via[sel]] * self._rate_factors(prev_duration, duration)[sel]
+                                             + self._fixed_terms(duration)[1][sel])
 
 
 def path_cost(graph: MetaMotionGraph, path: Path, intensity_z, durations_s, prev_duration_s=None) -> float:
