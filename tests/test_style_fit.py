@@ -156,9 +156,6 @@ def test_default_choice_on_bundled_songs_keeps_pieces_in_range(songs, bundled_db
         assert (chosen.share >= TARGET_SHARE) == (not fit_summary(chosen, music)["warnings"])
 
 
-@pytest.mark.xfail(strict=False, reason="the graph renders each beat at its visible stop "
-                   "(GraphConfig.accent_window, engines/graph): that spreads the played intervals, so "
-                   "the streaming engine plays 74-82 % of pieces in range where 91-97 % are expected")
 @pytest.mark.parametrize("song", [FISHIN.name, "Kevin_MacLeod_-_P_I_Tchaikovsky_Dance_of_the_Sugar_Plum_Fairy.ogg"])
 def test_default_dance_plays_ninety_percent_of_pieces_in_range(songs, bundled_db, song):
     clip = dance(songs[song], database=bundled_db)
