@@ -42,14 +42,14 @@ class AccentCosts:
     shows no clear stop (``strength`` 1 = the style's median stop), ``offbeat * min(s, 2)``
     for the stops ``s`` its piece makes between beats, and ``warp`` per unit of
     ``|ln rate|`` beyond ``free_warp`` (a piece played much faster or slower than
-    captured looks wrong and moves its stops).
+    captured looks wrong and moves its stops), ``far_warp`` more beyond 0.8-1.25x.
     """
 
     unaccented: float = 1.0
     offbeat: float = 1.0
     warp: float = 6.0
     free_warp: float = 0.1
-    far_warp: float = 0.0        # and this much more per unit of |ln rate| beyond ``warp_limit``
+    far_warp: float = 10.0       # and this much more per unit of |ln rate| beyond ``warp_limit``
     warp_limit: float = 0.223    # ln 1.25: past 0.8x-1.25x a piece no longer looks like itself
 
     def warp_cost(self, log_rate: np.ndarray) -> np.ndarray:
