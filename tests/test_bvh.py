@@ -3,7 +3,6 @@ hand-made files with known answers, and every malformed-file error."""
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
 import pytest
@@ -143,22 +142,20 @@ def test_round_trip_is_lossless(path, tmp_path):
     assert np.abs(rewritten - written).max() < 1e-4
 
 
-def test_parse_speed():
-    """3600 frames x 43 joints (the salsa fixture repeated) parse in well under a second."""
+def test_a_long_file_parses_whole():
+    """3600 frames x 43 joints (the salsa fixture repeated) parse to every frame and joint. (It takes
+    about 0.2 s on an idle 2-core machine; speed is not asserted here: a loaded machine makes any
+    wall-clock bound flaky.)"""
     text = (FIXTURES / "cmu_daz_salsa" / "60_01_scaled.bvh").read_text()
     head, body = text.split("Frame Time:", 1)
     frame_time_line, data = body.split("\n", 1)
     lines = data.strip("\n").split("\n")
     big = (head.replace("Frames: 120", "Frames: 3600") + "Frame Time:" + frame_time_line + "\n"
            + "\n".join(lines * 30) + "\n")
-    parse_bvh(big)  # warm-up
-    start = time.perf_counter()
     clip = parse_bvh(big)
-    elapsed = time.perf_counter() - start
     assert clip.n_frames == 3600 and clip.skeleton.n_joints == 43
-    # About 0.2 s on an idle 2-core machine; the bound only catches an order-of-magnitude slowdown,
-    # since a loaded machine (a benchmark running beside the tests) makes any wall-clock bound flaky.
-    assert elapsed < 2.0, f"{elapsed:.2f} s"
+    small = parse_bvh(text)
+    np.testing.assert_allclose(clip.local_rot[3480:], small.local_rot, atol=1e-12)  # the last copy is the file
 
 
 # ----------------------------------------------------------------------------- small files
