@@ -142,7 +142,7 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
         timings["database_s"] = time.perf_counter() - t
         clip = choreography_dance(music, db, config, timings=timings, song=name)
     else:
-        clip = _graph_dance(music, db, config, song, timings, t, progress)
+        clip = _graph_dance(music, db, config, name, timings, t, progress)
     clip.meta["summary"].update(metre_summary(clip, music, clip.meta["summary"].get("warnings", [])))
     return clip
 
@@ -166,7 +166,7 @@ def metre_summary(clip: MotionClip, music: MusicFeatures, warnings: list) -> dic
     return out
 
 
-def _graph_dance(music: MusicFeatures, db: MotionDatabase, config: DanceConfig, song, timings: dict,
+def _graph_dance(music: MusicFeatures, db: MotionDatabase, config: DanceConfig, name: str, timings: dict,
                  t: float, progress: Progress | None) -> MotionClip:
     """``dance`` for the meta-motion-graph engines (streaming, its signature variant, global)."""
     # The style and metrical level that warp the beat pieces least (engines/beatgrid.py).
@@ -197,7 +197,7 @@ def _graph_dance(music: MusicFeatures, db: MotionDatabase, config: DanceConfig, 
     # before the first frame is never seen.
     jumps = jumps[(jumps >= 0.0) & (jumps < music.duration_s)]
     summary = {
-        "song": music.source if isinstance(song, MusicFeatures) else str(song),
+        "song": name,
         "duration_s": music.duration_s, "tempo_bpm": music.tempo_bpm, "beats": music.n_beats,
         "beat_confidence": music.beat_confidence, "default_tempo": music.default_tempo,
         "style": style.name, "subdivide": subdivide, "engine": config.engine,

@@ -83,20 +83,14 @@ def ease(u, count0, count1, ease0, ease1):
     harder than its neighbours (the bar's "1"). Piece ends stay put: the source beat
     frames still land exactly on their beats. ``ease0 = ease1 = 0`` is linear.
     """
-    c, span, total = _eased(u, count0, count1, ease0, ease1)
-    return np.where(span > 0, c / np.where(span > 0, total, 1.0), u)
+    shown, _ = _timing(u, count0, count1, ease0, ease1)
+    return shown
 
 
 def ease_rate(u, count0, count1, ease0, ease1):
     """d ease / d u: the playback rate at ``u`` relative to the piece's mean rate."""
-    u = np.asarray(u, dtype=np.float64)
-    c0 = np.asarray(count0, dtype=np.float64)
-    span = np.asarray(count1, dtype=np.float64) - c0
-    local = c0 - np.floor(c0) + span * u
-    amount = ease0 + (np.asarray(ease1, dtype=np.float64) - ease0) * u
-    _, _, total = _eased(1.0, count0, count1, ease0, ease1)
-    return np.where(span > 0, span * (1.0 - amount * np.cos(2 * np.pi * local)) / np.where(span > 0, total, 1.0),
-                    1.0)
+    _, rate = _timing(u, count0, count1, ease0, ease1)
+    return rate
 
 
 def beat_ease(n: int, bar_position=None, beats_per_bar: int | None = None, *, amount: float,
@@ -117,9 +111,10 @@ def beat_ease(n: int, bar_position=None, beats_per_bar: int | None = None, *, am
     return np.maximum(out, 0.0)
 
 
-def _eased(u, count0, count1, ease0, ease1):
-    """``(F(u), span, F(1))`` with ``F(u) = integral of 1 - a(c) cos(2 pi c) dc`` from the piece's start,
-    in beats counted from the start's whole beat (the wave repeats every beat)."""
+def _timing(u, count0, count1, ease0, ease1):
+    """``(ease, ease_rate)`` at ``u``: ``F(u) / F(1)`` and ``span * (1 - a(c) cos 2 pi c) / F(1)``, with
+    ``F(u)`` the integral of ``1 - a(c) cos(2 pi c) dc`` from the piece's start, in beats counted from
+    the start's whole beat (the wave repeats every beat). Pieces of no span play linearly."""
     u = np.asarray(u, dtype=np.float64)
     c0 = np.asarray(count0, dtype=np.float64)
     span = np.asarray(count1, dtype=np.float64) - c0
@@ -128,10 +123,14 @@ def _eased(u, count0, count1, ease0, ease1):
     slope = (np.asarray(ease1, dtype=np.float64) - ease0) / safe  # a(c) = base + slope * c, locally
     base = ease0 - slope * start
 
-    def at(x):  # x minus the integral of (base + slope c) cos(2 pi c) dc, from start to x
+    def integral(x):  # x minus the integral of (base + slope c) cos(2 pi c) dc, from start to x
         return x - start - (_wave_integral(x, base, slope) - _wave_integral(start, base, slope))
 
-    return at(start + span * u), span, at(start + span)
+    c = start + span * u
+    total = np.where(span > 0, integral(start + span), 1.0)
+    shown = np.where(span > 0, integral(c) / total, u)
+    rate = np.where(span > 0, span * (1.0 - (base + slope * c) * np.cos(2 * np.pi * c)) / total, 1.0)
+    return shown, rate
 
 
 def _wave_integral(x, base, slope):

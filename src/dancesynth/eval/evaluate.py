@@ -295,16 +295,18 @@ def mocap_reference(mocap: Sequence[MotionClip], fps: float) -> MocapReference:
     for i, clip in enumerate(mocap):
         clip = _at_fps(mm.check_motion(clip, f"mocap[{i}]"), fps)
         jumps.append(mm.angular_velocity_jumps(clip)[1:-1])
+        g_rot, g_pos = clip_fk(clip)  # once per clip, for every metric below
         if clip.n_frames >= 2:
-            speeds.append(mm.joint_speeds(clip).ravel())
+            speeds.append(mm.joint_speeds(clip, global_pos=g_pos).ravel())
             travel += mm.root_travel_speed(clip) * (clip.n_frames - 1)
             travel_n += clip.n_frames - 1
             try:
-                feet.append((mm.foot_skate(clip), mm.pfc(clip), clip.n_frames))
+                feet.append((mm.foot_skate(clip, global_rot=g_rot, global_pos=g_pos),
+                             mm.pfc(clip, global_rot=g_rot, global_pos=g_pos), clip.n_frames))
             except ModelError:
                 pass  # no recognisable legs
         if clip.n_frames >= 4:
-            jerk_sum += mm.mean_jerk(clip) * (clip.n_frames - 3)
+            jerk_sum += mm.mean_jerk(clip, global_pos=g_pos) * (clip.n_frames - 3)
             jerk_n += clip.n_frames - 3
     nan = float("nan")
     feet = np.array([f for f in feet if np.isfinite(f[0]) and np.isfinite(f[1])]).reshape(-1, 3)
