@@ -83,6 +83,17 @@ def test_new_steps_leaves_out_the_sources_own_glitches_but_not_cuts():
     assert new_steps(dance, source, cuts=[14]).tolist() == [[14, 1], [29, 2]]
 
 
+def test_a_snap_the_source_makes_smaller_is_the_sources_own_played_faster():
+    source = swaying()
+    source[15:, 1] = turned(source[15:, 1], 25.0)   # under the threshold in the capture...
+    source[30:, 2] = turned(source[30:, 2], 10.0)
+    dance = swaying()
+    dance[15:, 1] = turned(dance[15:, 1], 40.0)     # ...shown 1.6x as fast: still the capture's
+    dance[30:, 2] = turned(dance[30:, 2], 40.0)     # a 10-degree wobble does not explain a 40-degree snap
+    assert one_frame_steps(dance).tolist() == [[14, 1], [29, 2]]
+    assert new_steps(dance, source).tolist() == [[29, 2]]
+
+
 # -- hand_in_head_frames -----------------------------------------------------------------------------------------
 
 

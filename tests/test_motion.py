@@ -108,6 +108,28 @@ def test_roles_are_found_on_every_skeleton(path):
     assert np.all(pos[:, roles.head, 1] > pos[:, roles.ankles[0], 1])
 
 
+def test_two_bone_ik_keeps_the_knee_in_front_when_the_input_leg_bends_backwards():
+    # A blend can carry a leg straight and on past straight (bent backwards) while the foot
+    # lock asks for a bent knee: the knee must stay in front, not swing back in one frame.
+    sk = Skeleton(("root", "hip", "knee", "ankle"), np.array([-1, 0, 1, 2]),
+                  np.array([[0, 0, 0], [0, 0, 0], [0, -0.45, 0], [0, -0.4, 0]]),
+                  (("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation"),)
+                  + (("Zrotation", "Xrotation", "Yrotation"),) * 3)
+    bend = np.radians(np.linspace(20.0, -10.0, 31))          # positive: the knee in front (+Z)
+    local = np.tile(rot.IDENTITY, (31, 4, 1))
+    local[:, 1] = rot.exp(np.stack([-bend / 2, 0 * bend, 0 * bend], -1))
+    local[:, 2] = rot.exp(np.stack([bend, 0 * bend, 0 * bend], -1))
+    g_rot, g_pos = fk(local, np.tile([0.0, 1.0, 0.0], (31, 1)), sk.offsets, sk.parents)
+    hip, ankle = g_pos[:, 1], g_pos[:, 3]
+    target = hip + 0.97 * 0.85 * (ankle - hip) / np.linalg.norm(ankle - hip, axis=-1, keepdims=True)
+    forward = np.tile([0.0, 0.0, 1.0], (31, 1))
+    new = two_bone_ik(g_rot, g_pos, (1, 2, 3), target, bend_toward=forward, pole_weight=0.3)
+    knee = hip + rot.apply(new[:, 0], np.array([0.0, -0.45, 0.0]))
+    assert np.all(knee[:, 2] - (hip[:, 2] + target[:, 2]) / 2 > 0.05)   # about 28 degrees of bend, in front
+    knee_turn = np.degrees(rot.angle(new[1:, 1], new[:-1, 1]))
+    assert knee_turn.max() < 5.0
+
+
 def test_two_bone_ik_reaches_reachable_targets_and_keeps_bone_lengths():
     clip = read_bvh(FIXTURES[0])
     roles = find_roles(clip.skeleton)

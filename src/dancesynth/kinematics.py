@@ -134,13 +134,15 @@ def two_bone_ik(g_rot, g_pos, chain, target, hinge_axis=None, *, bend_toward=Non
         hinge = bend_axis(g_rot, g_pos, chain) if hinge_axis is None else _unit(np.asarray(hinge_axis, float))
         pole = rot.apply(g_rot[:, top], hinge if np.any(hinge) else np.array([1.0, 0.0, 0.0]))
         strength = np.ones(n.shape[:-1] + (1,))
-    strength = strength * pole_weight
-    # Bent the wrong way past straight (mocap knees do, by a few degrees): mirror onto the pole's
-    # side. Mirroring every wrong-way bend, not only small ones, leaves no input where the side
-    # is undefined, so the result is continuous in the input.
+    # Bent the wrong way past straight (mocap knees do, by a few degrees, and blends more): mirror
+    # onto the pole's side, as far as the pole is defined. Mirroring every wrong-way bend, not only
+    # small ones, leaves no input where the side is undefined, so the result is continuous in the
+    # input; mirroring only partly would let a target that asks for more bend than the input has
+    # swing the knee from one side to the other as the input passes through straight.
     along = np.sum(n * pole, axis=-1, keepdims=True)
     n = n - 2.0 * strength * np.minimum(along, 0.0) * pole
-    lean = strength * np.clip(1.0 - np.linalg.norm(n, axis=-1, keepdims=True) / pole_sin, 0.0, 1.0) ** 2
+    lean = strength * pole_weight * np.clip(1.0 - np.linalg.norm(n, axis=-1, keepdims=True) / pole_sin,
+                                            0.0, 1.0) ** 2
     side = _unit(np.cross(n + pole_sin * lean * pole, u))  # where the lower bone leaves the upper bone's line
     w = np.cos(want)[:, None] * u + np.sin(want)[:, None] * side
     bend = _rotation_between(v, w)

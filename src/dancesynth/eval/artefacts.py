@@ -19,6 +19,9 @@ from .motion_metrics import check_motion
 #: A snap's neighbouring frame pairs may turn the joint at most this share of the snap.
 CALM_FRACTION = 1.0 / 3.0
 DEFAULT_STEP_DEG = 30.0
+#: A dance plays its source at most about twice as fast (accent timing 1.6x times a 1.25x warp),
+#: so a source turning a joint by half the dance's snap over the same frame pair explains it.
+SOURCE_SHARE = 0.5
 DEFAULT_HEAD_RADIUS_M = 0.08  # about half an adult head's width
 
 
@@ -77,10 +80,11 @@ def new_steps(motion, source, *, threshold_deg: float = DEFAULT_STEP_DEG, cuts=N
     ``source`` (F, J, 4) local rotations (or a ``MotionClip``) of what ``motion``
     shows before any clean-up, frame for frame -- for a dance, the mocap sampled at
     its source frames (``clip.meta["source_frames"]``). A snap of ``motion`` at
-    (f, j) is the source's own when ``source`` turns joint j by more than
-    ``threshold_deg`` over the same frame pair f too (a glitch in the capture),
-    unless f is in ``cuts``: frame pairs where ``source`` jumps from one piece of
-    mocap to another, which no captured motion explains.
+    (f, j) is the source's own when ``source`` turns joint j over the same frame
+    pair f by more than ``threshold_deg``, or by at least ``SOURCE_SHARE`` of the
+    snap (a glitch in the capture, played faster), unless f is in ``cuts``: frame
+    pairs where ``source`` jumps from one piece of mocap to another, which no
+    captured motion explains.
     """
     steps = one_frame_steps(motion, threshold_deg=threshold_deg)
     src = _local_rot(source)
@@ -89,7 +93,9 @@ def new_steps(motion, source, *, threshold_deg: float = DEFAULT_STEP_DEG, cuts=N
     if not len(steps):
         return steps
     f, j = steps[:, 0], steps[:, 1]
-    explained = np.degrees(rot.angle(src[f + 1, j], src[f, j])) > float(threshold_deg)
+    own = np.degrees(rot.angle(src[f + 1, j], src[f, j]))
+    snap = joint_steps_deg(_local_rot(motion))[f, j]
+    explained = (own > float(threshold_deg)) | (own >= SOURCE_SHARE * snap)
     if cuts is not None:
         explained &= ~np.isin(f, np.asarray(cuts, dtype=np.int64))
     return steps[~explained]
