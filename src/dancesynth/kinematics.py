@@ -134,13 +134,15 @@ def two_bone_ik(g_rot, g_pos, chain, target, hinge_axis=None, *, bend_toward=Non
         hinge = bend_axis(g_rot, g_pos, chain) if hinge_axis is None else _unit(np.asarray(hinge_axis, float))
         pole = rot.apply(g_rot[:, top], hinge if np.any(hinge) else np.array([1.0, 0.0, 0.0]))
         strength = np.ones(n.shape[:-1] + (1,))
-    # Bent the wrong way past straight (mocap knees do, by a few degrees, and blends more): mirror
-    # onto the pole's side, as far as the pole is defined. Mirroring every wrong-way bend, not only
-    # small ones, leaves no input where the side is undefined, so the result is continuous in the
-    # input; mirroring only partly would let a target that asks for more bend than the input has
-    # swing the knee from one side to the other as the input passes through straight.
+    # Bent the wrong way past straight (mocap knees do, by a few degrees, and blends through straight
+    # more): mirror onto the pole's side. A slight wrong-way bend is turned round fully, or a target
+    # asking for more bend than the input has would bend the knee backwards, and swing it from one
+    # side to the other as the input passes through straight; a clear one (beyond ~2 pole_sin) only
+    # by ``pole_weight``, as a leg bent that way means the pole (the toes) is the poor guide there.
+    # Mirroring every wrong-way bend by an amount continuous in the bend keeps the result continuous.
     along = np.sum(n * pole, axis=-1, keepdims=True)
-    n = n - 2.0 * strength * np.minimum(along, 0.0) * pole
+    slight = np.clip(1.0 - np.linalg.norm(n, axis=-1, keepdims=True) / (2.0 * pole_sin), 0.0, 1.0)
+    n = n - 2.0 * strength * (pole_weight + (1.0 - pole_weight) * slight) * np.minimum(along, 0.0) * pole
     lean = strength * pole_weight * np.clip(1.0 - np.linalg.norm(n, axis=-1, keepdims=True) / pole_sin,
                                             0.0, 1.0) ** 2
     side = _unit(np.cross(n + pole_sin * lean * pole, u))  # where the lower bone leaves the upper bone's line
