@@ -245,3 +245,23 @@ def test_the_metre_puts_the_strongest_stops_on_each_bars_first_beat(bundled_db):
     assert scores[True]["bar_accent_on_downbeat"] > scores[False]["bar_accent_on_downbeat"] + 0.2
     assert scores[True]["bar_accent_on_downbeat"] > 0.7
     assert scores[True]["downbeat_recall"] > 0.9
+
+
+def test_a_waltz_is_danced_in_three_by_a_style_that_can_when_the_best_fit_cannot(bundled_db):
+    from dancesynth.api import dance
+    from dancesynth.engines.beatgrid import fit_styles
+
+    beats = 0.3 + 60.0 / 90.0 * np.arange(60)         # 90 bpm, 3/4: 'mj' fits the tempo best, 'whirl' as well
+    pos = np.arange(60) % 3
+    loud = -15.0 + np.random.default_rng(2).normal(0, 0.5, 59)
+    music = MusicFeatures(beats[-1] + 0.4, beats, loud, 90.0, beats_per_bar=3, beat_in_bar=pos)
+    fits = [f.style.name for f in fit_styles(bundled_db, music)]
+    assert len(fits) > 1
+    clip = dance(music, database=bundled_db)
+    summary = clip.meta["summary"]
+    # mj's moves keep their fours on a waltz (energy period 4); the chooser tries the next style.
+    assert summary["dance_period_beats"] == 3, summary
+    assert summary["styles_tried_for_metre"][0] == fits[0] != summary["style"]
+    assert not any("3/4" in w for w in summary.get("warnings", []))
+    # The same waltz in a style named by the user is danced in that style, in three or not.
+    assert dance(music, database=bundled_db, style=fits[0]).meta["summary"]["style"] == fits[0]

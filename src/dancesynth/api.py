@@ -9,7 +9,7 @@ from typing import Callable
 
 import numpy as np
 
-from .engines.beatgrid import BeatGrid, beat_grid, fit_style, fit_summary
+from .engines.beatgrid import BeatGrid, StyleFit, beat_grid, fit_styles, fit_summary
 from .engines.graph.cache import load_graph
 from .engines.graph.engine import EngineConfig, GraphEngine, MusicSegment, SegmentFrames
 from .engines.graph.meta_graph import GraphConfig
@@ -151,29 +151,56 @@ def metre_summary(clip: MotionClip, music: MusicFeatures, warnings: list) -> dic
     """What the dance made of the metre: the period (in beats) at which its energy per beat repeats,
     and a warning where a song in three is not danced in three (the style's moves repeat in twos and
     fours)."""
-    from .eval.beat_metrics import dominant_beat_period
-    from .eval.motion_metrics import beat_interval_energy
-
     if not music.beats_per_bar or music.n_beats < 4:
         return {}
-    energy = beat_interval_energy(clip, music.beat_times_s)
-    period, _ = dominant_beat_period(energy[np.isfinite(energy)])
+    period = dance_period(clip, music)
     out = {"beats_per_bar": int(music.beats_per_bar), "dance_period_beats": period}
     if music.beats_per_bar == 3 and period is not None and period != 3:
         out["warnings"] = list(warnings) + [
             f"the song is in 3/4, but the dance's energy repeats every {period} beats, not in three: the "
-            f"'{clip.meta['summary'].get('style')}' moves found for it do not follow a waltz's bars"]
+            f"'{clip.meta['summary'].get('style')}' moves found for it do not follow a waltz's bars, nor did "
+            f"those of any other style that fits this tempo as well"]
     return out
+
+
+def dance_period(clip: MotionClip, music: MusicFeatures) -> int | None:
+    """The period (2, 3 or 4 beats) at which the dance's kinetic energy per music beat repeats most."""
+    from .eval.beat_metrics import dominant_beat_period
+    from .eval.motion_metrics import beat_interval_energy
+
+    energy = beat_interval_energy(clip, music.beat_times_s)
+    return dominant_beat_period(energy[np.isfinite(energy)])[0]
 
 
 def _graph_dance(music: MusicFeatures, db: MotionDatabase, config: DanceConfig, name: str, timings: dict,
                  t: float, progress: Progress | None) -> MotionClip:
-    """``dance`` for the meta-motion-graph engines (streaming, its signature variant, global)."""
-    # The style and metrical level that warp the beat pieces least (engines/beatgrid.py).
-    fit = fit_style(db, music, config.style)
-    style, subdivide = fit.style, fit.subdivide
-    timings["database_s"] = time.perf_counter() - t
+    """``dance`` for the meta-motion-graph engines (streaming, its signature variant, global).
 
+    The style and metrical level are those that warp the beat pieces least (engines/beatgrid.py).
+    A song in three is danced in three where the database allows it: when the first style's
+    dance repeats in twos or fours, the next style that fits the tempo as well is tried (some
+    styles' moves bend to a waltz's bars, others keep their fours), and the first dance is kept
+    when none does."""
+    fits = fit_styles(db, music, config.style)
+    timings["database_s"] = time.perf_counter() - t
+    clip = _graph_dance_fit(fits[0], music, config, name, timings, progress)
+    tried = [fits[0].style.name]
+    if music.beats_per_bar == 3 and music.n_beats >= 4 and dance_period(clip, music) != 3:
+        for fit in fits[1:]:
+            other = _graph_dance_fit(fit, music, config, name, dict(timings), progress)
+            tried.append(fit.style.name)
+            if dance_period(other, music) == 3:
+                clip = other
+                break
+    if len(tried) > 1:
+        clip.meta["summary"]["styles_tried_for_metre"] = tried
+    return clip
+
+
+def _graph_dance_fit(fit: StyleFit, music: MusicFeatures, config: DanceConfig, name: str, timings: dict,
+                     progress: Progress | None) -> MotionClip:
+    """``_graph_dance`` in one chosen style and metrical level."""
+    style, subdivide = fit.style, fit.subdivide
     t = time.perf_counter()
     graph, cached = load_graph(style, config.graph)
     timings["graph_s"] = time.perf_counter() - t

@@ -109,7 +109,9 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
     if s.get("beats_per_bar"):
         period = s.get("dance_period_beats")
         click.echo(f"metre     {s['beats_per_bar']} beats per bar"
-                   + (f"; the dance's energy repeats every {period} beats" if period else ""))
+                   + (f"; the dance's energy repeats every {period} beats" if period else "")
+                   + (f" (styles tried for it: {', '.join(s['styles_tried_for_metre'])})"
+                      if s.get("styles_tried_for_metre") else ""))
     if s["engine"] == "streaming":
         click.echo(f"engine    streaming: {s['segments']} segment(s) of {s['segment_s']:g} s, "
                    f"{s['transitions']} transitions, median {s['step_s_median'] * 1e3:.1f} ms per segment")

@@ -329,20 +329,40 @@ def style_fits(db: MotionDatabase, beat_intervals_s, name: str | None = None, *,
     best = max(f.share for f in fits)
 
     def key(f: StyleFit):
-        # Near the best -- but never a fit that misses the target when another reaches it.
-        near = f.share >= best - NEAR_SHARE and (f.share >= TARGET_SHARE or best < TARGET_SHARE)
         rate = abs(np.log(f.rate)) if np.isfinite(f.rate) and f.rate > 0 else np.inf
-        return (not near, not np.isscalar(f.subdivide), f.subdivide != 1, -len(f.style.beat_frames), rate,
-                -f.share)
+        return (not _near(f, best), not np.isscalar(f.subdivide), f.subdivide != 1, -len(f.style.beat_frames),
+                rate, -f.share)
 
     return sorted(fits, key=key)
+
+
+def _near(fit: StyleFit, best: float) -> bool:
+    """Near the best share -- but never a fit that misses the target when another reaches it."""
+    return fit.share >= best - NEAR_SHARE and (fit.share >= TARGET_SHARE or best < TARGET_SHARE)
+
+
+def equally_good(fits: list[StyleFit]) -> list[StyleFit]:
+    """Of ``style_fits``' list, the fits as good as the first, the first of each style, in order."""
+    best = max(f.share for f in fits)
+    out, seen = [], set()
+    for f in fits:
+        if _near(f, best) and f.style.name not in seen:
+            seen.add(f.style.name)
+            out.append(f)
+    return out
 
 
 def fit_style(db: MotionDatabase, music: MusicFeatures, name: str | None = None, *, levels=LEVELS,
               sections: bool = True) -> StyleFit:
     """The style (among ``name``'s, or all) and metrical level that warp ``music``'s beat pieces least."""
-    return style_fits(db, np.diff(music.beat_times_s), name, levels=levels, beat_in_bar=music.beat_in_bar,
-                      sections=sections)[0]
+    return fit_styles(db, music, name, levels=levels, sections=sections)[0]
+
+
+def fit_styles(db: MotionDatabase, music: MusicFeatures, name: str | None = None, *, levels=LEVELS,
+               sections: bool = True) -> list[StyleFit]:
+    """``fit_style`` and then the other styles that fit as well (``equally_good``), in order."""
+    return equally_good(style_fits(db, np.diff(music.beat_times_s), name, levels=levels,
+                                   beat_in_bar=music.beat_in_bar, sections=sections))
 
 
 def choose_style(db: MotionDatabase, tempo_bpm: float, name: str | None = None, *,
