@@ -183,11 +183,11 @@ def _graph_dance(music: MusicFeatures, db: MotionDatabase, config: DanceConfig, 
     when none does."""
     fits = fit_styles(db, music, config.style)
     timings["database_s"] = time.perf_counter() - t
-    clip = _graph_dance_fit(fits[0], music, config, name, timings, progress)
+    clip = _graph_dance_fit(fits[0], music, db, config, name, timings, progress)
     tried = [fits[0].style.name]
     if music.beats_per_bar == 3 and music.n_beats >= 4 and dance_period(clip, music) != 3:
         for fit in fits[1:]:
-            other = _graph_dance_fit(fit, music, config, name, dict(timings), progress)
+            other = _graph_dance_fit(fit, music, db, config, name, dict(timings), progress)
             tried.append(fit.style.name)
             if dance_period(other, music) == 3:
                 clip = other
@@ -197,8 +197,8 @@ def _graph_dance(music: MusicFeatures, db: MotionDatabase, config: DanceConfig, 
     return clip
 
 
-def _graph_dance_fit(fit: StyleFit, music: MusicFeatures, config: DanceConfig, name: str, timings: dict,
-                     progress: Progress | None) -> MotionClip:
+def _graph_dance_fit(fit: StyleFit, music: MusicFeatures, db: MotionDatabase, config: DanceConfig, name: str,
+                     timings: dict, progress: Progress | None) -> MotionClip:
     """``_graph_dance`` in one chosen style and metrical level."""
     style, subdivide = fit.style, fit.subdivide
     t = time.perf_counter()

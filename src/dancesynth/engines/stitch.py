@@ -96,19 +96,18 @@ def ease_rate(u, count0, count1, ease0, ease1):
 def beat_ease(n: int, bar_position=None, beats_per_bar: int | None = None, *, amount: float,
               downbeat: float = 0.0) -> np.ndarray:
     """How hard ``ease`` hits each of ``n`` grid beats: ``amount``, plus ``downbeat`` on a bar's
-    first beat and minus ``downbeat / (beats_per_bar - 1)`` on its others (a bar keeps its
-    mean), so the "1" is the bar's strongest accent. Beats of unknown position get ``amount``.
-    Each must stay below 1: at 1 the motion halts on the beat, above it would run backwards."""
+    first beat, so the "1" is the bar's strongest accent. (Taking as much off the other beats, so
+    that a bar kept its mean, cost them their stops: precision 0.62 against 0.69.) Beats of
+    unknown position get ``amount``. Each must stay below 1: at 1 the motion halts on the beat,
+    above it would run backwards."""
     if not (0.0 <= amount and 0.0 <= downbeat and amount + downbeat < 1.0):
         raise InputError(f"accent timing needs 0 <= ease_beats, 0 <= ease_downbeat and their sum < 1, got "
                          f"{amount} and {downbeat}")
     out = np.full(n, float(amount))
     if bar_position is None or not beats_per_bar or beats_per_bar < 2 or downbeat == 0:
         return out
-    pos = np.asarray(bar_position)
-    out[pos == 0] += downbeat
-    out[pos > 0] -= downbeat / (beats_per_bar - 1)
-    return np.maximum(out, 0.0)
+    out[np.asarray(bar_position) == 0] += downbeat
+    return out
 
 
 def _timing(u, count0, count1, ease0, ease1):

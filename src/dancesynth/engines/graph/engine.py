@@ -70,7 +70,7 @@ class EngineConfig:
     downbeat_stop: float = 0.5        # on a bar's first beat, a stop of strength s costs s x this less
     ease_beats: float = 0.3           # accent timing: play slower on each music beat, faster between
                                       # (stitch.ease; 0 = the paper's constant rate per piece)
-    ease_downbeat: float = 0.3        # ... and this much harder on each bar's first beat
+    ease_downbeat: float = 0.45       # ... and this much harder on each bar's first beat
 
     @classmethod
     def paper(cls) -> "EngineConfig":
