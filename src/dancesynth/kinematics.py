@@ -143,8 +143,12 @@ def two_bone_ik(g_rot, g_pos, chain, target, hinge_axis=None, *, bend_toward=Non
     along = np.sum(n * pole, axis=-1, keepdims=True)
     slight = np.clip(1.0 - np.linalg.norm(n, axis=-1, keepdims=True) / (2.0 * pole_sin), 0.0, 1.0)
     n = n - 2.0 * strength * (pole_weight + (1.0 - pole_weight) * slight) * np.minimum(along, 0.0) * pole
-    lean = strength * pole_weight * np.clip(1.0 - np.linalg.norm(n, axis=-1, keepdims=True) / pole_sin,
-                                            0.0, 1.0) ** 2
+    # A nearly straight chain's plane is noise: it leans towards the pole by ``pole_weight``, and
+    # fully where the target asks for much more bend than the chain has (its plane would then
+    # show, and swing as the noise does).
+    more = np.clip((np.arccos(np.clip(np.sum(u * v, axis=-1), -1.0, 1.0)) - want) / np.radians(20.0), 0.0, 1.0)
+    lean = strength * (pole_weight + (1.0 - pole_weight) * more[:, None]) * np.clip(
+        1.0 - np.linalg.norm(n, axis=-1, keepdims=True) / pole_sin, 0.0, 1.0) ** 2
     side = _unit(np.cross(n + pole_sin * lean * pole, u))  # where the lower bone leaves the upper bone's line
     w = np.cos(want)[:, None] * u + np.sin(want)[:, None] * side
     bend = _rotation_between(v, w)

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import rotations as rot
 from ..kinematics import fk
 from .beats import kinematic_beats, summed_speed
 
@@ -162,3 +163,33 @@ def cached_accent_beats(style, *, window: float = 0.35) -> AccentBeats:
     except OSError:
         pass  # a read-only cache only costs the analysis next time
     return out
+
+
+def limb_turns(style) -> np.ndarray:
+    """(F-1,) the largest angle (rad) any joint that moves a limb turns from frame f to f+1."""
+    sk = style.skeleton
+    reach = np.linalg.norm(sk.offsets, axis=1)
+    for j, end in sk.end_sites.items():
+        reach[j] += np.linalg.norm(end)
+    subtree = reach.copy()
+    for j in range(sk.n_joints - 1, 0, -1):
+        subtree[sk.parents[j]] += subtree[j]
+    joints = np.flatnonzero(subtree > 0.03)  # ignore finger tips and zero-length helpers
+    out = np.zeros(max(style.n_frames - 1, 0))
+    for a in range(0, len(out), 8192):  # in blocks: a big database need not sit in memory twice
+        q = style.local_rot[a:a + 8193, joints].astype(np.float64)
+        out[a:a + len(q) - 1] = rot.angle(q[1:], q[:-1]).max(axis=1)
+    return out
+
+
+def fast_beats(style, frames: np.ndarray, percentile: float = 99.0) -> np.ndarray:
+    """Per flat frame of ``frames`` (beats as shown): whether a limb turns, into or out of it,
+    faster than ``percentile`` of the style's fastest-limb turns over all its frames -- a beat
+    the mocap whips through (a hit). A cut there would have to carry that speed into other
+    motion, which no blend does within its limits: it shows as a pop."""
+    turn = limb_turns(style)
+    turn[np.asarray(style.clip_starts[1:-1]) - 1] = 0.0  # nothing turns from a clip's last frame to the next's first
+    limit = np.percentile(turn, percentile)
+    last = len(turn) - 1
+    frames = np.asarray(frames, dtype=np.int64)
+    return np.maximum(turn[np.clip(frames - 1, 0, last)], turn[np.clip(frames, 0, last)]) > limit

@@ -22,7 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from ... import rotations as rot
 from ...kinematics import fk
-from ...motion.accents import AccentCosts, cached_accent_beats
+from ...motion.accents import AccentCosts, cached_accent_beats, fast_beats
 from ...motion.database import Style
 from ...motion.motifs import style_motifs
 from ...motion.roles import find_roles
@@ -40,6 +40,8 @@ class MixerConfig:
     tempo_weight: float = 20.0     # cost per (log2 time-warp rate)^2: prefer words of the beat's length
                                    # (20: 9 in 10 words within 0.8-1.25x; at 2, 2 in 3)
     jump_cost: float = 0.5         # added to every stitch that is not the mocap's own continuation
+    fast_stitch_cost: float = 10.0  # ... and this where a limb whips through the cut (motion.accents.fast_beats):
+                                    # no blend carries that speed into another word without a pop
     foot_lock: bool = True
     unlock_s: float = 0.15         # a foot moved by a stitch is free this long (see ``_released``)
     unlock_tol_m: float = 0.05
@@ -56,7 +58,8 @@ class WordBank:
     ``start_pose``/``end_pose`` are joint rotation matrices flattened (W, J*9) with the
     root's heading removed (the mixer re-places every word facing where the dancer
     faces), so ``‖a − b‖²`` ≈ the summed squared joint angles between two poses;
-    ``start_vel``/``end_vel`` are their time derivatives (per second, source time).
+    ``start_vel``/``end_vel`` are their time derivatives (per second, source time);
+    ``start_fast``/``end_fast`` mark the ends where a limb whips through (``fast_beats``).
     """
 
     words: MotionWords
@@ -66,6 +69,8 @@ class WordBank:
     start_vel: np.ndarray
     end_vel: np.ndarray
     fps: float
+    start_fast: np.ndarray
+    end_fast: np.ndarray
 
     def __len__(self) -> int:
         return len(self.motif)
@@ -95,7 +100,7 @@ def word_bank(style: Style, motif_model, accent_window: float = 0.0) -> WordBank
     start_pose, after_start = _pose_vectors(style, s), _pose_vectors(style, s + 1)
     end_pose, before_end = _pose_vectors(style, e), _pose_vectors(style, e - 1)
     return WordBank(words, motif, start_pose, end_pose, (after_start - start_pose) * style.fps,
-                    (end_pose - before_end) * style.fps, style.fps)
+                    (end_pose - before_end) * style.fps, style.fps, fast_beats(style, s), fast_beats(style, e))
 
 
 def substitute_motifs(bank: WordBank, centroids: np.ndarray) -> np.ndarray:
@@ -110,12 +115,14 @@ def substitute_motifs(bank: WordBank, centroids: np.ndarray) -> np.ndarray:
 
 def _match(bank: WordBank, prev: np.ndarray, cand: np.ndarray, config: "MixerConfig") -> np.ndarray:
     """(len(prev), len(cand)) cost of dancing ``cand`` right after ``prev``: 0 where the mocap
-    itself continues that way, else the pose + velocity difference plus ``jump_cost``."""
+    itself continues that way, else the pose + velocity difference plus ``jump_cost`` (and
+    ``fast_stitch_cost`` where a limb whips through either end)."""
     def sq(a, b):  # squared distances between rows, (len(a), len(b))
         return np.maximum((a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * a @ b.T, 0.0)
 
     cost = (sq(bank.end_pose[prev], bank.start_pose[cand])
-            + config.velocity_s ** 2 * sq(bank.end_vel[prev], bank.start_vel[cand]) + config.jump_cost)
+            + config.velocity_s ** 2 * sq(bank.end_vel[prev], bank.start_vel[cand]) + config.jump_cost
+            + config.fast_stitch_cost * (bank.end_fast[prev][:, None] | bank.start_fast[cand][None, :]))
     return np.where(bank.words.end[prev][:, None] == bank.words.start[cand][None, :], 0.0, cost)
 
 

@@ -26,7 +26,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from ... import rotations as rot
-from ...motion.accents import cached_accent_beats
+from ...motion.accents import cached_accent_beats, fast_beats, limb_turns
 from ...motion.database import Style
 
 GRAPH_FORMAT_VERSION = 1
@@ -48,6 +48,9 @@ class GraphConfig:
                                   # its most similar beat as an extra edge (see build_graph)
     max_joint_speed_deg_s: float = 1500.0  # beat intervals where a limb turns faster than this
                                            # hold capture glitches (wrist flips) and are not played
+    calm_jumps: float = 99.0        # no jump at a beat where a joint turns faster than this percentile of
+                                    # the style's fastest-joint speeds (0 = off, the paper): no blend can
+                                    # carry a velocity like that within its limits, so it shows as a pop
     prune_trap_cycles: bool = True  # drop steps into small cycles the main cycle cannot be reached
                                     # from (a dance that enters one loops there forever; see derive_steps)
     accent_window: float = 0.0      # render each beat at its most visible stop within this fraction of a
@@ -59,7 +62,7 @@ class GraphConfig:
     def paper(cls) -> "GraphConfig":
         """Eq. (1)-(3) as printed: literal neighbouring frames, no limits on jumps."""
         return cls(neighbour_s=0.0, max_jumps_per_beat=0, min_jump_beats=0, prune_trap_cycles=False,
-                   accent_window=0.0)
+                   accent_window=0.0, calm_jumps=0.0)
 
     def __post_init__(self):
         if not self.thr > 1.0:
@@ -158,20 +161,7 @@ def joint_weights(style: Style) -> np.ndarray:
 def rotation_glitches(style: Style, limit_deg_s: float) -> np.ndarray:
     """(F-1,) True where some joint that moves a limb turns faster than ``limit_deg_s``
     between frame f and f+1 (a capture glitch such as a wrist flip, not a movement)."""
-    sk = style.skeleton
-    reach = np.linalg.norm(sk.offsets, axis=1)
-    for j, end in sk.end_sites.items():
-        reach[j] += np.linalg.norm(end)
-    subtree = reach.copy()
-    for j in range(sk.n_joints - 1, 0, -1):
-        subtree[sk.parents[j]] += subtree[j]
-    joints = np.flatnonzero(subtree > 0.03)  # ignore finger tips and zero-length helpers
-    limit_rad = np.radians(limit_deg_s) / style.fps
-    out = np.zeros(max(style.n_frames - 1, 0), dtype=bool)
-    for a in range(0, len(out), 8192):  # in blocks: a big database need not sit in memory twice
-        q = style.local_rot[a:a + 8193, joints].astype(np.float64)
-        out[a:a + len(q) - 1] = rot.angle(q[1:], q[:-1]).max(axis=1) > limit_rad
-    return out
+    return limb_turns(style) > np.radians(limit_deg_s) / style.fps
 
 
 def _poses(style: Style, frames: np.ndarray, joints: np.ndarray) -> np.ndarray:
@@ -283,6 +273,10 @@ def build_graph(style: Style, config: GraphConfig = GraphConfig()) -> MetaMotion
         # everything) from joining the whole graph.
         mutual = np.isin(dst * n + src, src * n + dst)
         src, dst, rd_e = src[mutual], dst[mutual], rd_e[mutual]
+    if config.calm_jumps > 0:
+        fast = fast_beats(style, shown, config.calm_jumps)
+        calm = ~(fast[src] | fast[dst])
+        src, dst, rd_e = src[calm], dst[calm], rd_e[calm]
 
     graph = MetaMotionGraph(
         style=style.name, fps=style.fps, node_frame=frames, node_clip=clip, next_node=next_node,
