@@ -64,10 +64,12 @@ def engine_dances(music, db, seed: int, engines, style: str | None = GENRE) -> d
     """Each engine's dance of ``music`` in ``style`` (None: the product's choice), with the wall time it took."""
     from ..api import dance
     from ..engines.graph.engine import EngineConfig
+    from ..engines.graph.meta_graph import GraphConfig
 
     kinds = {"streaming": dict(follow_signature=True, render=EngineConfig(signature_weight=0.0)),  # counts only
              "signature": dict(follow_signature=True), "global": dict(engine="global"),
-             "choreography": dict(engine="choreography"), "neural": dict(engine="neural")}
+             "choreography": dict(engine="choreography"), "neural": dict(engine="neural"),
+             "paper": dict(graph=GraphConfig.paper(), render=EngineConfig.paper())}  # Xu et al. as printed
     out = {}
     for name in engines:
         t = time.perf_counter()
