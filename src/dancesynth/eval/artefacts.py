@@ -93,8 +93,9 @@ def new_steps(motion, source, *, threshold_deg: float = DEFAULT_STEP_DEG, cuts=N
     if not len(steps):
         return steps
     f, j = steps[:, 0], steps[:, 1]
+    q = _local_rot(motion)
     own = np.degrees(rot.angle(src[f + 1, j], src[f, j]))
-    snap = joint_steps_deg(_local_rot(motion))[f, j]
+    snap = np.degrees(rot.angle(q[f + 1, j], q[f, j]))
     explained = (own > float(threshold_deg)) | (own >= SOURCE_SHARE * snap)
     if cuts is not None:
         explained &= ~np.isin(f, np.asarray(cuts, dtype=np.int64))

@@ -99,8 +99,9 @@ def word_bank(style: Style, motif_model, accent_window: float = 0.0) -> WordBank
     # A word spans at least two frames of one clip, so start+1 and end-1 stay inside it.
     start_pose, after_start = _pose_vectors(style, s), _pose_vectors(style, s + 1)
     end_pose, before_end = _pose_vectors(style, e), _pose_vectors(style, e - 1)
+    fast = fast_beats(style, np.r_[s, e])
     return WordBank(words, motif, start_pose, end_pose, (after_start - start_pose) * style.fps,
-                    (end_pose - before_end) * style.fps, style.fps, fast_beats(style, s), fast_beats(style, e))
+                    (end_pose - before_end) * style.fps, style.fps, fast[:len(s)], fast[len(s):])
 
 
 def substitute_motifs(bank: WordBank, centroids: np.ndarray) -> np.ndarray:
