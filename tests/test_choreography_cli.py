@@ -17,6 +17,8 @@ def test_choreography_dance_then_eval(tmp_path):
     proc = run("dance", SONG, "-o", out, "--engine", "choreography", "--seed", "2", "--report", report)
     assert proc.returncode == 0, proc.stderr
     assert "engine    choreography" in proc.stdout and "chi2 to the salsa template" in proc.stdout
+    planned = json.loads(report.read_text())["summary"]["plan_followed"]
+    assert f"{planned:.0%} of beats as planned" in proc.stdout
     from dancesynth.io.bvh import read_bvh
 
     clip = read_bvh(out)

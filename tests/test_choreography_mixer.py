@@ -9,7 +9,7 @@ import pytest
 
 from dancesynth.api import DanceConfig, analyse, dance
 from dancesynth.engines.choreography.engine import choreography_dance, style_bank
-from dancesynth.engines.choreography.mixer import MixerConfig
+from dancesynth.engines.choreography.mixer import MixerConfig, substitute_motifs
 from dancesynth.errors import InputError
 from dancesynth.eval import motion_metrics as mm
 from dancesynth.eval.bench_quality import at_fps
@@ -48,13 +48,33 @@ def mocap(bundled_db):
 def test_the_dance_follows_the_genre_signature(danced, model, bundled_db):
     s = danced.meta["summary"]
     assert danced.meta["style"] == STYLE and s["engine"] == "choreography"
-    ids = danced.meta["motif_ids"]
+    ids, plan = danced.meta["motif_ids"], danced.meta["motif_plan"]
     assert len(ids) == len(danced.meta["grid_times_s"]) - 1
-    np.testing.assert_array_equal(ids, danced.meta["motif_plan"])   # the style has words of every planned motif
-    assert chi2(model.templates["salsa"], model.signature(ids)) < 0.05   # measured 0.007
-    # The motion itself, cut at its beats, mostly dances the planned motifs (measured 0.84).
+    # Where every word of the planned motif needs a stitch, a word the mocap dances right after the
+    # previous beat's candidates may dance another motif instead (``off_plan_depth``), mostly without
+    # a stitch (measured: 0.61-0.67 of beats as planned, seeds 0-3; 4 of 44 off-plan beats stitched).
+    meant = substitute_motifs(style_bank(bundled_db.styles[STYLE], model), model.centroids)[plan]  # motifs it has
+    off = np.flatnonzero(ids != meant)
+    grid, cuts = danced.meta["grid_times_s"], danced.meta["transition_times_s"]
+    stitched = np.isin(np.round(grid[off], 6), np.round(cuts, 6))
+    assert off.size and stitched.mean() < 0.25, (off.size, stitched.sum())
+    assert s["plan_followed"] == pytest.approx(np.mean(ids == plan)) and s["plan_followed"] > 0.55
+    # Measured 0.08-0.10 (0.007 with every beat as planned); the paper's full method 0.27, raw salsa clips 0.38.
+    assert chi2(model.templates["salsa"], model.signature(ids)) < 0.15
+    # The motion itself, cut at its beats, mostly dances the motifs it meant to (measured 0.84).
     found = found_motifs(danced, model, danced.meta["grid_times_s"])
     assert np.mean(found == ids[:len(found)]) > 0.7
+
+
+def test_continuing_the_mocap_off_the_plan_stitches_less_and_moves_like_the_mocap(danced, music, bundled_db,
+                                                                                 model, mocap):
+    strict = choreography_dance(music, bundled_db, DanceConfig(engine="choreography", seed=3), song="song",
+                                timings={}, motif_model=model, mixer=MixerConfig(off_plan_depth=0))
+    np.testing.assert_array_equal(strict.meta["motif_ids"], strict.meta["motif_plan"])
+    assert len(danced.meta["transition_times_s"]) < 0.75 * len(strict.meta["transition_times_s"])  # 61 vs 94
+    ref = mocap_reference(mocap, danced.fps)
+    speed = [evaluate(d, mocap=ref)["joint_speed_p99_vs_mocap"] for d in (danced, strict)]
+    assert abs(np.log(speed[0])) < abs(np.log(speed[1])), speed  # measured 1.13 vs 1.42
 
 
 def test_words_are_real_words_with_their_beats_on_music_beats(danced, bundled_db):
@@ -168,3 +188,4 @@ def test_reference_too_short_for_a_word_is_refused(music, bundled_db, model, tmp
     with pytest.raises(InputError, match="no motion word|fewer than two motion beats"):
         choreography_dance(music, bundled_db, DanceConfig(recreate=ref), song="song", timings={},
                            motif_model=model)
+

@@ -120,6 +120,7 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
                    f"{s['step_s_median'] * 1e3:.1f} ms")
     if s.get("motif_chi2") is not None:
         click.echo(f"motifs    chi2 to the {s['genre']} template {s['motif_chi2']:.3f}"
+                   + (f", {s['plan_followed']:.0%} of beats as planned" if s.get("plan_followed") is not None else "")
                    + (f", {s['constraints']} constraint(s)" if s.get("constraints") else "")
                    + (f", re-creating {s['recreate']}" if s.get("recreate") else ""))
     # The choreography and neural engines spend the graph's stage on motifs and on loading the model.

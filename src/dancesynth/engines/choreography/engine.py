@@ -116,8 +116,11 @@ def choreography_dance(music: MusicFeatures, db: MotionDatabase, config, *, song
     else:
         plan = plan_motifs(n, model.templates[style.genre], model.transitions[style.genre], rng, fixed=fixed)
     danced = substitute_motifs(bank, model.centroids)[plan]
+    free = np.full(n, ref is None)  # a re-creation and the user's constraints are danced as planned
+    free[list(fixed)] = False
     result = mix(style, bank, danced, grid.times_s, music.duration_s, fps=config.fps, rng=rng, config=mixer,
-                 beat_count=grid.count, bar_position=grid.bar_position, beats_per_bar=grid.beats_per_bar)
+                 beat_count=grid.count, bar_position=grid.bar_position, beats_per_bar=grid.beats_per_bar,
+                 free=free)
     timings["synthesis_s"] = time.perf_counter() - t
     clip = _clip(style, music, grid, result, plan, fixed, subdivide, model, song=song, config=config,
                  timings=timings, ref=ref)

@@ -4,7 +4,9 @@ For each beat interval of the music the choreography level has chosen a motif. I
 cluster members -- the real words of the chosen style that the motif model assigns
 to it -- are the candidates; the one whose first poses best continue the previous
 word's last poses (joint rotations and their velocities) is danced, time-scaled so
-that its two motion beats fall on the interval's two music beats.
+that its two motion beats fall on the interval's two music beats. Where every candidate
+would need a stitch, the mocap's own continuation may dance a beat or two of another
+motif instead (beyond the paper: stitches on most beats made the dance hectic and glide).
 
 Each chosen word is a "piece" of source frames for ``stitch.render``, which already
 does what the paper's blending step needs: a word that does not continue where the
@@ -37,11 +39,17 @@ class MixerConfig:
                                    # the stitches (nearly one per beat) show as stops between beats, at
                                    # 0.4 the words blur (motifs found again in the motion 0.81 -> 0.66)
     velocity_s: float = 0.1        # a velocity difference counts as the pose change over this time
-    tempo_weight: float = 20.0     # cost per (log2 time-warp rate)^2: prefer words of the beat's length
-                                   # (20: 9 in 10 words within 0.8-1.25x; at 2, 2 in 3)
+    tempo_weight: float = 40.0     # cost per (log2 time-warp rate)^2: prefer words of the beat's length
+                                   # (40: 97 % of words within 0.8-1.25x on the bench's songs; 20: 88 %; 2: 2 in 3)
     jump_cost: float = 0.5         # added to every stitch that is not the mocap's own continuation
+    off_plan_depth: int = 2        # where the plan's words all need a stitch, the mocap's own continuation
+    off_plan_cost: float = 4.0     # may dance up to this many beats of another motif, at this cost per beat
+                                   # (depth 0, the paper: a stitch on ~70 % of jpop's beats, joint speed 1.6x,
+                                   # travel 1.7x, PFC 10x its mocap; docs/choreography.md has the measurements)
     fast_stitch_cost: float = 10.0  # ... and this where a limb whips through the cut (motion.accents.fast_beats):
                                     # no blend carries that speed into another word without a pop
+    root_weight: float = 100.0     # cost per m^2 of root-over-feet offset (and per (m/s * velocity_s)^2 of root
+                                   # velocity) a stitch leaves for the blend to glide the body across
     foot_lock: bool = True
     unlock_s: float = 0.15         # a foot moved by a stitch is free this long (see ``_released``)
     unlock_tol_m: float = 0.05
@@ -71,6 +79,8 @@ class WordBank:
     fps: float
     start_fast: np.ndarray
     end_fast: np.ndarray
+    start_root: np.ndarray   # (W, 6) root over the ankles' midpoint (m) and root velocity (m/s), heading frame
+    end_root: np.ndarray
 
     def __len__(self) -> int:
         return len(self.motif)
@@ -88,6 +98,19 @@ def _pose_vectors(style: Style, frames: np.ndarray) -> np.ndarray:
     return mats.reshape(len(frames), -1)
 
 
+def _root_vectors(style: Style, frames: np.ndarray) -> np.ndarray:
+    """(F, 6): the root relative to the ankles' midpoint and the root's velocity (source time), both in
+    the root's heading frame: what a stitch makes the blend glide the body across."""
+    sk = style.skeleton
+    ankles = list(find_roles(sk).ankles)
+    idx = np.stack([frames, frames + 1])
+    _, pos = fk(style.local_rot[idx], style.root_pos[idx], sk.offsets, sk.parents, only=ankles)
+    unturn = rot.about_y(-rot.heading(style.local_rot[frames, 0].astype(np.float64)))
+    over = rot.apply(unturn, pos[0][:, 0] - pos[0][:, ankles].mean(axis=1))
+    vel = rot.apply(unturn, (style.root_pos[frames + 1] - style.root_pos[frames]) * style.fps)
+    return np.concatenate([over, vel], axis=1)
+
+
 def word_bank(style: Style, motif_model, accent_window: float = 0.0) -> WordBank:
     """Every word of ``style``, assigned to the motifs of ``motif_model``; with ``accent_window``,
     its end poses are taken where the mixer cuts it: at its first and last beat's visible stop."""
@@ -101,7 +124,8 @@ def word_bank(style: Style, motif_model, accent_window: float = 0.0) -> WordBank
     end_pose, before_end = _pose_vectors(style, e), _pose_vectors(style, e - 1)
     fast = fast_beats(style, np.r_[s, e])
     return WordBank(words, motif, start_pose, end_pose, (after_start - start_pose) * style.fps,
-                    (end_pose - before_end) * style.fps, style.fps, fast[:len(s)], fast[len(s):])
+                    (end_pose - before_end) * style.fps, style.fps, fast[:len(s)], fast[len(s):],
+                    _root_vectors(style, s), _root_vectors(style, e - 1))
 
 
 def substitute_motifs(bank: WordBank, centroids: np.ndarray) -> np.ndarray:
@@ -121,15 +145,38 @@ def _match(bank: WordBank, prev: np.ndarray, cand: np.ndarray, config: "MixerCon
     def sq(a, b):  # squared distances between rows, (len(a), len(b))
         return np.maximum((a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * a @ b.T, 0.0)
 
+    scale = np.r_[1.0, 1.0, 1.0, config.velocity_s, config.velocity_s, config.velocity_s]
     cost = (sq(bank.end_pose[prev], bank.start_pose[cand])
             + config.velocity_s ** 2 * sq(bank.end_vel[prev], bank.start_vel[cand]) + config.jump_cost
+            + config.root_weight * sq(bank.end_root[prev] * scale, bank.start_root[cand] * scale)
             + config.fast_stitch_cost * (bank.end_fast[prev][:, None] | bank.start_fast[cand][None, :]))
     return np.where(bank.words.end[prev][:, None] == bank.words.start[cand][None, :], 0.0, cost)
 
 
+def _candidates(bank: WordBank, motifs, members: dict, depth: int, free) -> list:
+    """Each beat's candidate words: its motif's members and, where ``free`` allows, the words the mocap
+    dances right after the previous beat's candidates, for up to ``depth`` beats after a member.
+    Danced after the word they follow they need no stitch; after another word they are stitched
+    like any other candidate."""
+    next_word = np.searchsorted(bank.words.start, bank.words.end)
+    has_next = next_word < len(bank)
+    has_next[has_next] &= bank.words.start[next_word[has_next]] == bank.words.end[has_next]
+    out, off = [], np.zeros(0, dtype=int)  # off: how many beats after a member of the plan
+    for i, m in enumerate(motifs):
+        cands, off_now = members[int(m)], np.zeros(len(members[int(m)]), dtype=int)
+        if depth and i and (free is None or free[i]):
+            prev = out[-1]
+            rows = np.flatnonzero(has_next[prev] & (off < depth))
+            rows = rows[~np.isin(next_word[prev[rows]], cands)]
+            cands, off_now = np.r_[cands, next_word[prev[rows]]], np.r_[off_now, off[rows] + 1]
+        out.append(cands)
+        off = off_now
+    return out
+
+
 def choose_words(bank: WordBank, motifs: np.ndarray, durations_s: np.ndarray, rng: np.random.Generator,
                  config: MixerConfig = MixerConfig(), word_cost: np.ndarray | None = None,
-                 word_s: np.ndarray | None = None) -> np.ndarray:
+                 word_s: np.ndarray | None = None, free: np.ndarray | None = None) -> np.ndarray:
     """The word (index into ``bank``) danced on each beat interval, one of that beat's motif.
 
     The paper picks, beat by beat, the word whose first poses best continue the previous
@@ -139,13 +186,16 @@ def choose_words(bank: WordBank, motifs: np.ndarray, durations_s: np.ndarray, rn
     are found wherever the plan allows them. A word's length far from its beat's costs
     ``tempo_weight`` per (log2 time-warp rate)^2, and ``word_cost`` (W,), if given, is
     added per word; the seed breaks ties at the start. ``word_s`` (W,): each word's length as
-    it will be played (default: from its first beat to its last).
+    it will be played (default: from its first beat to its last). Beyond the paper, where
+    ``free`` allows it the mocap's own continuation may stand in for the plan for up to
+    ``off_plan_depth`` beats, at ``off_plan_cost`` a beat (``_candidates``).
     """
     members = {int(m): np.flatnonzero(bank.motif == m) for m in np.unique(motifs)}
     log_len = np.log2(np.maximum(bank.duration_s(np.arange(len(bank))) if word_s is None else word_s, 1e-3))
-    cands = [members[int(m)] for m in motifs]
+    cands = _candidates(bank, motifs, members, config.off_plan_depth, free)
     extra = np.zeros(len(bank)) if word_cost is None else word_cost
-    unary = [config.tempo_weight * (log_len[c] - np.log2(d)) ** 2 + extra[c] for c, d in zip(cands, durations_s)]
+    unary = [config.tempo_weight * (log_len[c] - np.log2(d)) ** 2 + extra[c]
+             + config.off_plan_cost * (bank.motif[c] != m) for c, d, m in zip(cands, durations_s, motifs)]
     total = unary[0] + 1e-3 * rng.random(len(cands[0]))  # where the dance starts is the seed's choice
     back = []
     for i in range(1, len(motifs)):
@@ -197,10 +247,12 @@ class Mix:
 def mix(style: Style, bank: WordBank, motifs: np.ndarray, beat_times_s: np.ndarray, end_s: float, *,
         fps: float, rng: np.random.Generator, config: MixerConfig = MixerConfig(),
         beat_count: np.ndarray | None = None, bar_position: np.ndarray | None = None,
-        beats_per_bar: int | None = None) -> Mix:
+        beats_per_bar: int | None = None, free: np.ndarray | None = None) -> Mix:
     """Dance ``motifs[i]`` on beat interval ``beat_times_s[i] → [i+1]``, rendered up to ``end_s``.
 
-    ``beat_count``, ``bar_position``, ``beats_per_bar``: the beats' counts and metre, as in ``BeatGrid``."""
+    ``beat_count``, ``bar_position``, ``beats_per_bar``: the beats' counts and metre, as in ``BeatGrid``.
+    ``free`` (B,): beats where the mocap's own continuation may stand in for the plan (default all;
+    ``config.off_plan_depth``)."""
     times = np.asarray(beat_times_s, dtype=np.float64)
     accents = cached_accent_beats(style, window=config.accent_window) if config.accent_window > 0 else None
     word_cost = word_s = None
@@ -211,7 +263,7 @@ def mix(style: Style, bank: WordBank, motifs: np.ndarray, beat_times_s: np.ndarr
         if config.accent:
             arrive, played = config.accent.beat_costs(accents.strength, accents.offbeat)
             word_cost = arrive[end] + played[start]
-    chosen = choose_words(bank, np.asarray(motifs), np.diff(times), rng, config, word_cost, word_s)
+    chosen = choose_words(bank, np.asarray(motifs), np.diff(times), rng, config, word_cost, word_s, free)
     f0, f1 = bank.words.start[chosen], bank.words.end[chosen]
     jump = np.r_[False, f0[1:] != f1[:-1]]
     if accents is not None:
