@@ -272,3 +272,24 @@ def test_a_waltz_is_danced_in_three_by_a_style_that_can_when_the_best_fit_cannot
     assert not any("3/4" in w for w in summary.get("warnings", []))
     # The same waltz in a style named by the user is danced in that style, in three or not.
     assert dance(music, database=bundled_db, style=fits[0]).meta["summary"]["style"] == fits[0]
+
+
+def test_a_waltz_no_well_fitting_style_dances_in_three_takes_one_that_does_and_says_so(bundled_db):
+    from dancesynth.api import dance
+    from dancesynth.engines.beatgrid import METRE_SHARE, fit_styles
+
+    beats = 0.3 + 60.0 / 100.0 * np.arange(60)        # 100 bpm, 3/4: salsa-97-116bpm and mj fit, both keep fours
+    pos = np.arange(60) % 3
+    loud = -15.0 + np.random.default_rng(2).normal(0, 0.5, 59)
+    music = MusicFeatures(beats[-1] + 0.4, beats, loud, 100.0, beats_per_bar=3, beat_in_bar=pos)
+    fits = fit_styles(bundled_db, music, min_share=METRE_SHARE)
+    clip = dance(music, database=bundled_db)
+    summary = clip.meta["summary"]
+    assert summary["dance_period_beats"] == 3, summary
+    chosen = next(f for f in fits if f.style.name == summary["style"])
+    assert chosen.for_metre and METRE_SHARE <= chosen.share < fits[0].share
+    assert summary["styles_tried_for_metre"][0] == fits[0].style.name
+    assert any("in three" in w for w in summary["warnings"]), summary["warnings"]
+    # A 4/4 song at the same tempo keeps the best fit.
+    four = MusicFeatures(beats[-1] + 0.4, beats, loud, 100.0, beats_per_bar=4, beat_in_bar=np.arange(60) % 4)
+    assert dance(four, database=bundled_db).meta["summary"]["style"] == fits[0].style.name

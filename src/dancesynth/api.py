@@ -9,7 +9,7 @@ from typing import Callable
 
 import numpy as np
 
-from .engines.beatgrid import BeatGrid, StyleFit, beat_grid, fit_styles, fit_summary
+from .engines.beatgrid import METRE_SHARE, BeatGrid, StyleFit, beat_grid, fit_styles, fit_summary
 from .engines.graph.cache import load_graph
 from .engines.graph.engine import EngineConfig, GraphEngine, MusicSegment, SegmentFrames
 from .engines.graph.meta_graph import GraphConfig
@@ -179,13 +179,15 @@ def _graph_dance(music: MusicFeatures, db: MotionDatabase, config: DanceConfig, 
     The style and metrical level are those that warp the beat pieces least (engines/beatgrid.py).
     A song in three is danced in three where the database allows it: when the first style's
     dance repeats in twos or fours, the next style that fits the tempo as well is tried (some
-    styles' moves bend to a waltz's bars, others keep their fours), and the first dance is kept
-    when none does."""
-    fits = fit_styles(db, music, config.style)
+    styles' moves bend to a waltz's bars, others keep their fours), then styles that still play
+    ``METRE_SHARE`` of the pieces within the natural rates, and the first dance is kept when none
+    dances in three."""
+    waltz = music.beats_per_bar == 3 and music.n_beats >= 4
+    fits = fit_styles(db, music, config.style, min_share=METRE_SHARE if waltz else None)
     timings["database_s"] = time.perf_counter() - t
     clip = _graph_dance_fit(fits[0], music, db, config, name, timings, progress)
     tried = [fits[0].style.name]
-    if music.beats_per_bar == 3 and music.n_beats >= 4 and dance_period(clip, music) != 3:
+    if waltz and dance_period(clip, music) != 3:
         for fit in fits[1:]:
             other = _graph_dance_fit(fit, music, db, config, name, dict(timings), progress)
             tried.append(fit.style.name)

@@ -24,7 +24,7 @@ against the grid intervals, beat by beat, following the song's tempo curve.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -35,6 +35,8 @@ RATE_RANGE = (0.8, 1.25)   # playback rates (captured seconds per music second) 
 TARGET_SHARE = 0.9         # below this expected share of pieces in RATE_RANGE, the summary warns
 LEVELS = (1, 2, 0.5)       # the metrical levels fit_style tries: the beat, double time, half time
 NEAR_SHARE = 0.05          # fits within this share of the best are equally good: prefer the beat, a big style
+METRE_SHARE = 0.5          # a song in three may take a style that fits its tempo less well, down to this share,
+                           # if that style dances in three (whirl, 81 bpm, on a 100 bpm waltz: 0.55 expected)
 MIN_SECTION_BEATS = 32     # a section with its own level lasts at least this many music beats (8 bars of 4)
 LOCAL_TEMPO_BEATS = 8      # the local beat period is the median over this many beats on either side
 
@@ -227,6 +229,7 @@ class StyleFit:
     share: float               # expected share of beat pieces played at a rate within RATE_RANGE
     rate: float                # typical playback rate (median captured interval / median grid interval)
     forced: bool = False       # the user named this style (or its genre)
+    for_metre: bool = False    # a worse fit to the tempo, tried because the best fits do not dance in three
 
     @property
     def level(self) -> str:
@@ -359,10 +362,19 @@ def fit_style(db: MotionDatabase, music: MusicFeatures, name: str | None = None,
 
 
 def fit_styles(db: MotionDatabase, music: MusicFeatures, name: str | None = None, *, levels=LEVELS,
-               sections: bool = True) -> list[StyleFit]:
-    """``fit_style`` and then the other styles that fit as well (``equally_good``), in order."""
-    return equally_good(style_fits(db, np.diff(music.beat_times_s), name, levels=levels,
-                                   beat_in_bar=music.beat_in_bar, sections=sections))
+               sections: bool = True, min_share: float | None = None) -> list[StyleFit]:
+    """``fit_style`` and then the other styles that fit as well (``equally_good``), in order; with
+    ``min_share``, then each remaining style's best fit that reaches it, the best first."""
+    fits = style_fits(db, np.diff(music.beat_times_s), name, levels=levels, beat_in_bar=music.beat_in_bar,
+                      sections=sections)
+    out = equally_good(fits)
+    if min_share is not None:
+        seen = {f.style.name for f in out}
+        for f in sorted(fits, key=lambda f: -f.share):
+            if f.share >= min_share and f.style.name not in seen:
+                seen.add(f.style.name)
+                out.append(replace(f, for_metre=True))
+    return out
 
 
 def choose_style(db: MotionDatabase, tempo_bpm: float, name: str | None = None, *,
@@ -407,6 +419,9 @@ def fit_warnings(fit: StyleFit, tempo_bpm: float, actual: float | None = None) -
     done = f" ({actual:.0%} were)" if actual is not None else ""
     what = (f"{at}, its beat pieces play at typically {fit.rate:.2f}x their captured speed and only "
             f"{fit.share:.0%} are expected within {lo:g}-{hi:g}x{done}, so the dance will look {how}")
+    if fit.for_metre:
+        return [f"style '{st.name}' (captured at about {st.natural_tempo_bpm:.0f} bpm) dances this {tempo_bpm:.0f} "
+                f"bpm music in three, which the styles that fit its tempo better do not: {what}"]
     if fit.forced:
         return [f"style '{st.name}' (captured at about {st.natural_tempo_bpm:.0f} bpm) fits this "
                 f"{tempo_bpm:.0f} bpm music poorly: {what}; leave out --style, or pick a style captured near "
