@@ -226,7 +226,9 @@ def _encode(cmd: list[str], frames, total: int, progress) -> None:
         progress(0, total)
     with tempfile.TemporaryFile() as err:
         # Buffered stdin: its write() retries partial writes, so no frame is ever cut short.
-        proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=err)
+        # ffmpeg gets its own process group, so a Ctrl-C is Python's alone to handle (the finally below
+        # stops ffmpeg); otherwise ffmpeg might die of it first and the interrupt read as a failed write.
+        proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=err, process_group=0)
         _grow_pipe(proc.stdin)
         broken = False
         try:
