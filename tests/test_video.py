@@ -221,10 +221,14 @@ def test_interrupt_leaves_the_old_file_and_no_partial(dance_clip, tmp_path):
 
 
 _INTERRUPTED_RENDER = """
+import signal
 import sys
 import time
 from pathlib import Path
 from dancesynth.export import render_video_files
+
+# As in a terminal: a test run started as a shell's background job hands its children SIGINT ignored.
+signal.signal(signal.SIGINT, signal.default_int_handler)
 
 said = []
 
