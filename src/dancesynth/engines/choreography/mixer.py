@@ -177,7 +177,7 @@ def _candidates(bank: WordBank, motifs, members: dict, depth: int, free) -> list
 def choose_words(bank: WordBank, motifs: np.ndarray, durations_s: np.ndarray, rng: np.random.Generator,
                  config: MixerConfig = MixerConfig(), word_cost: np.ndarray | None = None,
                  word_s: np.ndarray | None = None, free: np.ndarray | None = None) -> np.ndarray:
-    """The word (index into ``bank``) danced on each beat interval, one of that beat's motif.
+    """The word (index into ``bank``) danced on each beat interval, as a rule one of that beat's motif.
 
     The paper picks, beat by beat, the word whose first poses best continue the previous
     word. We minimise the same stitch cost over the whole song at once (Viterbi over
