@@ -182,12 +182,13 @@ def limb_turns(style) -> np.ndarray:
     return out
 
 
-def fast_beats(style, frames: np.ndarray, percentile: float = 99.0) -> np.ndarray:
+def fast_beats(style, frames: np.ndarray, percentile: float = 99.0, turns: np.ndarray | None = None) -> np.ndarray:
     """Per flat frame of ``frames`` (beats as shown): whether a limb turns, into or out of it,
     faster than ``percentile`` of the style's fastest-limb turns over all its frames -- a beat
     the mocap whips through (a hit). A cut there would have to carry that speed into other
-    motion, which no blend does within its limits: it shows as a pop."""
-    turn = limb_turns(style)
+    motion, which no blend does within its limits: it shows as a pop. ``turns``: ``limb_turns(style)``
+    if the caller has it already."""
+    turn = (limb_turns(style) if turns is None else turns).copy()
     turn[np.asarray(style.clip_starts[1:-1]) - 1] = 0.0  # nothing turns from a clip's last frame to the next's first
     limit = np.percentile(turn, percentile)
     last = len(turn) - 1

@@ -158,10 +158,11 @@ def joint_weights(style: Style) -> np.ndarray:
     return w / max(w.sum(), 1e-12)
 
 
-def rotation_glitches(style: Style, limit_deg_s: float) -> np.ndarray:
+def rotation_glitches(style: Style, limit_deg_s: float, turns: np.ndarray | None = None) -> np.ndarray:
     """(F-1,) True where some joint that moves a limb turns faster than ``limit_deg_s``
-    between frame f and f+1 (a capture glitch such as a wrist flip, not a movement)."""
-    return limb_turns(style) > np.radians(limit_deg_s) / style.fps
+    between frame f and f+1 (a capture glitch such as a wrist flip, not a movement).
+    ``turns``: ``limb_turns(style)`` if the caller has it already."""
+    return (limb_turns(style) if turns is None else turns) > np.radians(limit_deg_s) / style.fps
 
 
 def _poses(style: Style, frames: np.ndarray, joints: np.ndarray) -> np.ndarray:
@@ -227,8 +228,9 @@ def build_graph(style: Style, config: GraphConfig = GraphConfig()) -> MetaMotion
     accents = cached_accent_beats(style, window=config.accent_window)
     shown = np.asarray(accents.frame, dtype=np.int64)
     same_next = np.r_[clip[1:] == clip[:-1], False]
+    turns = limb_turns(style)  # the glitch filter and the calm jumps both need it: measured once
     if n > 1 and np.isfinite(config.max_joint_speed_deg_s):
-        glitch = np.r_[rotation_glitches(style, config.max_joint_speed_deg_s), False]
+        glitch = np.r_[rotation_glitches(style, config.max_joint_speed_deg_s, turns), False]
         cum_glitch = np.concatenate([[0], np.cumsum(glitch)])
         same_next[:-1] &= cum_glitch[shown[1:]] == cum_glitch[shown[:-1]]
     next_node = np.where(same_next, np.arange(n) + 1, -1)
@@ -274,7 +276,7 @@ def build_graph(style: Style, config: GraphConfig = GraphConfig()) -> MetaMotion
         mutual = np.isin(dst * n + src, src * n + dst)
         src, dst, rd_e = src[mutual], dst[mutual], rd_e[mutual]
     if config.calm_jumps > 0:
-        fast = fast_beats(style, shown, config.calm_jumps)
+        fast = fast_beats(style, shown, config.calm_jumps, turns)
         calm = ~(fast[src] | fast[dst])
         src, dst, rd_e = src[calm], dst[calm], rd_e[calm]
 
