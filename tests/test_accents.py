@@ -221,13 +221,33 @@ def test_the_dance_stops_on_the_beats_far_above_chance_and_a_random_walk(vibe, b
     assert ours["accent_recall"] > paper["accent_recall"] + 0.2
     assert ours["accent_precision"] > paper["accent_precision"] + 0.1
     # The search, not only the renderer, puts them there: a random walk with the same renderer
-    # (accent timing included) scores less (measured P / R / F 0.88 / 0.95 / 0.91 against
-    # 0.84 / 0.86 / 0.85).
+    # (accent timing included) scores less (measured P / R / F 0.80 / 0.87 / 0.83 against
+    # 0.78 / 0.83 / 0.81). The margin was 0.06 in F before the intensity match got its weight
+    # (EngineConfig.intensity_weight 8, Spearman 0.35 -> 0.49 on this song): it is a trade.
     style = bundled_db.styles[dance(vibe, database=bundled_db).meta["style"]]
     walk = _accents(walk_dance(style, vibe), vibe)
     assert ours["accent_precision"] > walk["accent_precision"] and ours["accent_recall"] > walk["accent_recall"]
-    assert _f(ours) > _f(walk) + 0.05
+    assert _f(ours) > _f(walk) + 0.02
 
+
+
+def test_the_dance_gets_livelier_where_the_music_gets_louder(vibe, bundled_db):
+    """Xu et al.'s intensity match keeps its weight next to the accent costs: the kinetic energy of
+    each beat follows the music's loudness (Spearman, measured 0.49; 0.35 with the intensity term at
+    the weight of each stop cost, as before)."""
+    from dancesynth.api import dance
+    from dancesynth.engines.graph.engine import EngineConfig
+    from dancesynth.eval.evaluate import evaluate
+    from dancesynth.motion.accents import AccentCosts
+
+    def spearman(config):
+        clip = dance(vibe, database=bundled_db, render=config)
+        return evaluate(clip, music_beats_s=vibe.beat_times_s,
+                        music_loudness_db=vibe.intensity_db)["intensity_spearman"]
+
+    ours = spearman(EngineConfig())
+    assert ours >= 0.45
+    assert ours > spearman(EngineConfig(intensity_weight=1.0, accent=AccentCosts())) + 0.1
 
 def _f(scores):
     p, r = scores["accent_precision"], scores["accent_recall"]
@@ -280,7 +300,9 @@ def test_a_waltz_no_well_fitting_style_dances_in_three_takes_one_that_does_and_s
 
     beats = 0.3 + 60.0 / 100.0 * np.arange(60)        # 100 bpm, 3/4: salsa-97-116bpm and mj fit, both keep fours
     pos = np.arange(60) % 3
-    loud = -15.0 + np.random.default_rng(2).normal(0, 0.5, 59)
+    # A waltz's "1" is its loudest beat (the generated waltzes: +0.9 to +1.6 dB); the dance follows the
+    # loudness, so on pure noise no style dances in three and the summary says so instead.
+    loud = -15.0 + 0.5 * (pos[:-1] == 0) + np.random.default_rng(2).normal(0, 0.5, 59)
     music = MusicFeatures(beats[-1] + 0.4, beats, loud, 100.0, beats_per_bar=3, beat_in_bar=pos)
     fits = fit_styles(bundled_db, music, min_share=METRE_SHARE)
     clip = dance(music, database=bundled_db)

@@ -64,19 +64,22 @@ class EngineConfig:
     foot_lock: bool = True            # hold planted feet still through blends (leg IK)
     jump_cost: float = 0.25           # added to every jump (0 = paper): fewer, better-motivated jumps
     signature_weight: float = DEFAULT_WEIGHT  # cost scale of a motif not owed, when following a signature
-    accent: AccentCosts | None = AccentCosts()  # prefer pieces that stop on their beats (None = paper)
+    # prefer pieces that stop on their beats (None = paper); the warp costs scale with intensity_weight
+    accent: AccentCosts | None = AccentCosts(warp=16.0, far_warp=30.0)
     bar_accent: float = 0.5           # ask for this much more intensity (z units) on each bar's first beat,
                                       # less on the others: the big moves start on the "1" (0 = paper)
     downbeat_stop: float = 0.5        # on a bar's first beat, a stop of strength s costs s x this less
     ease_beats: float = 0.3           # accent timing: play slower on each music beat, faster between
                                       # (stitch.ease; 0 = the paper's constant rate per piece)
     ease_downbeat: float = 0.45       # ... and this much harder on each bar's first beat
+    intensity_weight: float = 8.0     # eq. (8)'s intensity match against the stop, jump and repeat costs
+                                      # beyond the paper (1 = the weight they were tuned at)
 
     @classmethod
     def paper(cls) -> "EngineConfig":
         """The objective of eq. (4)-(9) alone: no repeat penalty, no jump cost, no accent costs."""
         return cls(repeat_penalty=0.0, jump_cost=0.0, accent=None, bar_accent=0.0, downbeat_stop=0.0,
-                   ease_beats=0.0, ease_downbeat=0.0)
+                   ease_beats=0.0, ease_downbeat=0.0, intensity_weight=1.0)
 
     def beat_ease(self, n: int, bar_position, beats_per_bar) -> np.ndarray:
         """The accent timing of each of ``n`` beats (``stitch.beat_ease``)."""
@@ -201,7 +204,8 @@ class GraphEngine:
                                                             segment.beats_per_bar, self.config.bar_accent)
         path = search(self.graph, target, np.diff(beats), start_nodes=start,
                       prev_duration_s=state.prev_duration_s, thc=thc, node_penalty=penalty,
-                      steps=self.steps, **self._beat_costs(bars, segment.music_beat))
+                      steps=self.steps, intensity_weight=self.config.intensity_weight,
+                      **self._beat_costs(bars, segment.music_beat))
         decay = 0.5 ** (1.0 / self.config.repeat_half_life_beats)
         recent = recent * decay ** len(inten)
         np.add.at(recent, path.nodes[1:], decay ** np.arange(len(inten) - 1, -1, -1))
@@ -236,6 +240,7 @@ class GraphEngine:
             None if bar_position is None else bar_position[:-1], beats_per_bar, self.config.bar_accent)
         path = search(self.graph, target, np.diff(beat_times_s),
                       start_nodes=state.start_nodes, thc=0.0, steps=self.steps,
+                      intensity_weight=self.config.intensity_weight,
                       **self._beat_costs(bar_position, music_beat))
         t1 = time.perf_counter()
         pieces = pieces_from_path(self.graph, path, np.asarray(beat_times_s, dtype=np.float64), beat_count,

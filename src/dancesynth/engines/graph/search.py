@@ -57,7 +57,8 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
            start_nodes: np.ndarray, prev_duration_s: float | None = None, thc: float = np.inf,
            node_penalty: np.ndarray | None = None, jump_cost: float = 0.0,
            accent: AccentCosts | None = None, beat_class: np.ndarray | None = None,
-           class_cost: np.ndarray | None = None, steps: "StepCosts | None" = None) -> Path:
+           class_cost: np.ndarray | None = None, steps: "StepCosts | None" = None,
+           intensity_weight: float = 1.0) -> Path:
     """Best path for K beat intervals (eq. 7-9).
 
     ``intensity_z`` (K,) are the normalised music intensities, ``durations_s`` (K,)
@@ -70,7 +71,8 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     where the graph knows its accents. ``class_cost`` (C, N) is added on arriving at a node
     on beat ``k`` (0..K) of class ``beat_class[k]`` (-1: none), e.g. the downbeats.
     ``steps``: the graph's ``StepCosts`` for this ``jump_cost`` and ``accent``, built once and
-    reused across segments (built here when not given).
+    reused across segments (built here when not given). ``intensity_weight`` scales eq. (8)'s
+    intensity deviation against the costs added beyond the paper (1 = as printed).
     """
     intensity_z = np.asarray(intensity_z, dtype=np.float64)
     durations_s = np.asarray(durations_s, dtype=np.float64)
@@ -87,7 +89,7 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     for k in range(k_steps):
         # Eq. (8) for every destination at once. Mono steps have one destination each;
         # jumps are sorted by destination, so a reduceat takes each destination's best.
-        dev = np.abs(graph.w1_z - intensity_z[k])
+        dev = intensity_weight * np.abs(graph.w1_z - intensity_z[k])
         row = costs[k + 1]
         row[steps.m_dst] = steps.mono(costs[k], dev, durations_s[k])
         if steps.j_nodes.size:
@@ -110,7 +112,7 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     jumped = np.empty(k_steps, dtype=bool)
     nodes[k_steps] = end
     for k in range(k_steps - 1, -1, -1):
-        dev = np.abs(graph.w1_z - intensity_z[k])
+        dev = intensity_weight * np.abs(graph.w1_z - intensity_z[k])
         v = nodes[k + 1]
         m_sel = steps.mono_into[v:v + 1] if steps.mono_into[v] >= 0 else np.zeros(0, dtype=np.int64)
         j_sel = np.arange(steps.j_first[v], steps.j_last[v])

@@ -34,8 +34,8 @@ from ...motion.database import Style
 from ...motion.motifs import MotifModel, style_motifs
 from .meta_graph import MetaMotionGraph
 
-DEFAULT_WEIGHT = 1.0  # on the scale of the DP's z-scored intensity deviations (a jump costs 0.25); 0.5 until
-                      # the accent costs (motion.accents) joined the DP and diluted it
+DEFAULT_WEIGHT = 8.0  # on the scale of the DP's weighted intensity deviations (EngineConfig.intensity_weight 8;
+                      # a jump costs 0.25): chi2 0.10, 0.24 at weight 1 (0.12 when the intensity weight was 1)
 _EPS = 1e-3          # keeps the ratio finite for motifs neither danced nor in the template
 
 
