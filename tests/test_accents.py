@@ -249,6 +249,35 @@ def test_the_dance_gets_livelier_where_the_music_gets_louder(vibe, bundled_db):
     assert ours >= 0.45
     assert ours > spearman(EngineConfig(intensity_weight=1.0, accent=AccentCosts())) + 0.1
 
+
+def test_looking_ahead_follows_the_loudness_closer_and_still_hits_the_beats(vibe, bundled_db):
+    """``--lookahead``: each 5 s segment chosen seeing the next 5 s (measured Spearman 0.71
+    against 0.49, precision / recall 0.86 / 0.92)."""
+    from dancesynth.api import dance
+    from dancesynth.eval.evaluate import evaluate
+
+    def scores(**kw):
+        clip = dance(vibe, database=bundled_db, **kw)
+        assert clip.duration_s == pytest.approx(vibe.duration_s, abs=1 / clip.fps)
+        return evaluate(clip, music_beats_s=vibe.beat_times_s, music_loudness_db=vibe.intensity_db)
+
+    plain, ahead = scores(), scores(lookahead_s=5.0)
+    assert ahead["intensity_spearman"] > plain["intensity_spearman"] + 0.1
+    assert ahead["accent_precision"] >= 0.6 and ahead["accent_recall"] >= 0.7
+
+
+def test_looking_ahead_on_a_tiny_style_never_runs_out_of_path(bundled_db):
+    """The look-ahead commits only its segment, which must still be able to dance the rest
+    (synchronisation capacity): 'whirl' has 21 beats, the song 300."""
+    from dancesynth.api import dance
+
+    beats = 0.3 + 60.0 / 81.0 * np.arange(300)
+    music = MusicFeatures(beats[-1] + 0.5, beats, -15.0 + np.sin(np.arange(299) / 9.0), 81.0,
+                          beats_per_bar=4, beat_in_bar=np.arange(300) % 4)
+    clip = dance(music, database=bundled_db, style="whirl", lookahead_s=5.0)
+    assert clip.duration_s == pytest.approx(music.duration_s, abs=1 / clip.fps)
+    assert clip.meta["summary"]["lookahead_s"] == 5.0
+
 def _f(scores):
     p, r = scores["accent_precision"], scores["accent_recall"]
     return 2 * p * r / (p + r)

@@ -171,6 +171,13 @@ def test_graph_thresholds_are_checked(out):
     assert_clean_failure(run("dance", TRUMPET, "-o", out, "--thr", "0.5"), out, "THR")
 
 
+@pytest.mark.parametrize("args, words", [(("--lookahead", "-1"), ("look-ahead", "0 to 600")),
+                                         (("--lookahead", "nan"), ("look-ahead",)),
+                                         (("--lookahead", "5", "--engine", "global"), ("--lookahead", "global"))])
+def test_lookahead_is_checked(out, args, words):
+    assert_clean_failure(run("dance", TRUMPET, "-o", out, *args), out, *words)
+
+
 def test_build_db_writes_a_database_that_dance_can_use(tmp_path, out):
     db = tmp_path / "built"
     proc = run("build-db", REPO / "tests" / "data" / "mocap", "-o", db)

@@ -316,6 +316,29 @@ def test_pfc_follows_edge():
     assert M.pfc(biped(standing(t, x=0.5 * t))) == 0.0                  # root never accelerates
 
 
+def test_pfc_scores_five_second_clips_and_averages_them_as_edge_does():
+    from dancesynth.kinematics import clip_fk
+
+    t = times(30.0, 12.0)
+    local = np.tile(rot.IDENTITY, (t.size, 12, 1))
+    local[:, 1] = rot.from_euler(np.stack([0 * t, 25 * np.sin(3 * t), 0 * t], -1), "ZXY")
+    local[:, 5] = rot.from_euler(np.stack([0 * t, 15 * np.sin(2 * t + 1), 0 * t], -1), "ZXY")
+    root_x = 0.3 * np.sin(0.7 * t) + 0.02 * t**2
+    clip = biped(standing(t, x=root_x, y=0.9 + 0.02 * np.sin(5 * t), z=0.1 * np.sin(0.5 * t)), local, 30.0)
+    _, g_pos = clip_fk(clip)
+    joints = np.concatenate([g_pos[:, :1], M.feet_of(clip).reshape(-1, 4, 3)], axis=1)
+    # 360 frames: windows [0, 150) and [150, 360) (the 2 s tail joins the second).
+    assert M.pfc(clip) == pytest.approx(np.mean([edge_pfc(joints[:150]), edge_pfc(joints[150:])]), rel=1e-9)
+    assert M.pfc(clip, window_s=None) == pytest.approx(edge_pfc(joints), rel=1e-9)
+    # A jolt in the last seconds no longer rescales the first window's accelerations.
+    jolted = biped(standing(t, x=root_x + 0.2 * (t > 11.0), y=0.9 + 0.02 * np.sin(5 * t),
+                            z=0.1 * np.sin(0.5 * t)), local, 30.0)
+    _, j_pos = clip_fk(jolted)
+    j_joints = np.concatenate([j_pos[:, :1], M.feet_of(jolted).reshape(-1, 4, 3)], axis=1)
+    assert M.pfc(jolted) == pytest.approx(np.mean([edge_pfc(joints[:150]), edge_pfc(j_joints[150:])]), rel=1e-9)
+    assert edge_pfc(j_joints[150:]) != pytest.approx(edge_pfc(joints[150:]), rel=0.01)
+
+
 def test_beat_interval_energy_of_a_gliding_body():
     t = times(60.0, 2.0)
     clip = biped(standing(t, x=2.0 * t))

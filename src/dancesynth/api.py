@@ -28,6 +28,8 @@ class DanceConfig:
     style: str | None = None
     engine: str | None = None   # None: "choreography" when motif_at or recreate is given, else "streaming"
     segment_s: float = 5.0
+    lookahead_s: float = 0.0            # streaming: each segment's search also sees this much of the music after
+                                        # it (a file's music is known): closer to its loudness, feet slide more
     fps: float = 30.0
     seed: int | None = None
     max_duration_s: float = 15 * 60.0
@@ -55,6 +57,11 @@ class DanceConfig:
                              "what has been danced so far)")
         if not 0.5 <= self.segment_s <= 600:
             raise InputError(f"segment length {self.segment_s} s is out of range: use 0.5 to 600 seconds")
+        if not 0 <= self.lookahead_s <= 600:
+            raise InputError(f"look-ahead {self.lookahead_s} s is out of range: use 0 to 600 seconds")
+        if self.lookahead_s > 0 and self.engine != "streaming":
+            raise InputError(f"--lookahead is for the streaming engine, not '{self.engine}' (the global DP sees the "
+                             "whole song already)")
         if not 1 <= self.fps <= 240:
             raise InputError(f"frame rate {self.fps} is out of range: use 1 to 240 fps")
 
@@ -90,11 +97,16 @@ def synthesise(engine: GraphEngine, grid: BeatGrid, duration_s: float, config: D
     out, step_s = [], []
     for i, (b, e) in enumerate(bounds):
         last = i == len(bounds) - 1
-        seg = MusicSegment(grid.times_s[b:e + 1], grid.intensity_db[b:e],
+        # A file's music is all known: each segment is searched with what follows it in view
+        # (a receding horizon) and only its own beats are danced.
+        a = min(int(np.searchsorted(grid.times_s, grid.times_s[e] + config.lookahead_s + 1e-9, side="right")) - 1,
+                grid.n_intervals) if config.lookahead_s > 0 else e
+        a = max(a, e)
+        seg = MusicSegment(grid.times_s[b:a + 1], grid.intensity_db[b:a],
                            remaining_beats=grid.n_intervals - e, end_s=duration_s if last else None,
-                           bar_position=bars[b:e + 1], beats_per_bar=beats_per_bar,
-                           music_beat=grid.is_music_beat[b:e + 1],
-                           beat_count=None if grid.count is None else grid.count[b:e + 1])
+                           bar_position=bars[b:a + 1], beats_per_bar=beats_per_bar,
+                           music_beat=grid.is_music_beat[b:a + 1],
+                           beat_count=None if grid.count is None else grid.count[b:a + 1], ahead=a - e)
         t = time.perf_counter()
         state, frames = engine.step(state, seg)
         step_s.append(time.perf_counter() - t)
@@ -230,7 +242,8 @@ def _graph_dance_fit(fit: StyleFit, music: MusicFeatures, db: MotionDatabase, co
         "duration_s": music.duration_s, "tempo_bpm": music.tempo_bpm, "beats": music.n_beats,
         "beat_confidence": music.beat_confidence, "default_tempo": music.default_tempo,
         "style": style.name, "subdivide": subdivide, "engine": config.engine,
-        "segments": stats["segments"], "segment_s": config.segment_s, "transitions": int(len(jumps)),
+        "segments": stats["segments"], "segment_s": config.segment_s, "lookahead_s": config.lookahead_s,
+        "transitions": int(len(jumps)),
         "graph_nodes": graph.n_nodes, "graph_mean_in_degree": graph.mean_in_degree, "graph_cached": cached,
         "frames": len(local), "fps": config.fps, "timings_s": timings,
         "step_s_median": float(np.median(stats["step_s"])), "step_s_max": float(np.max(stats["step_s"])),

@@ -43,6 +43,9 @@ def cli():
 @click.option("--follow-signature", is_flag=True,
               help="Streaming engine: also keep the genre's motif signature (Aristidou et al.'s global structure).")
 @click.option("--segment-seconds", type=float, default=5.0, show_default=True, help="Streaming segment length.")
+@click.option("--lookahead", "lookahead", type=float, default=0.0, show_default=True, metavar="SECONDS",
+              help="Streaming: choose each segment seeing this much of the music after it; the dance follows the "
+                   "music's loudness more closely, its feet slide a little more (docs/accents.md).")
 @click.option("--fps", type=float, default=30.0, show_default=True, help="Frame rate of the output.")
 @click.option("--seed", type=int, default=None, help="Vary the dance between runs (default: deterministic).")
 @click.option("--database", type=click.Path(file_okay=False, path_type=Path),
@@ -55,15 +58,15 @@ def cli():
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Also write a JSON report (beats, transitions, time warps) for 'dancesynth eval --report'.")
 @click.option("-q", "--quiet", is_flag=True, help="No summary and no progress bar.")
-def dance(song, output, style, engine, recreate, motif_at, follow_signature, segment_seconds, fps, seed, database,
-          max_minutes, ths, thr, paper, report_path, quiet):
+def dance(song, output, style, engine, recreate, motif_at, follow_signature, segment_seconds, lookahead, fps, seed,
+          database, max_minutes, ths, thr, paper, report_path, quiet):
     """Make a beat-synchronised dance for SONG (wav, ogg, flac, mp3, ...) and write it as BVH."""
     from .api import DanceConfig, dance as make_dance
     from .io.bvh import write_bvh
 
     output = output or Path(song.stem + ".bvh")
     bvh_output(output)
-    config = DanceConfig(style=style, engine=engine, segment_s=segment_seconds, fps=fps, seed=seed,
+    config = DanceConfig(style=style, engine=engine, segment_s=segment_seconds, lookahead_s=lookahead, fps=fps, seed=seed,
                          max_duration_s=max_minutes * 60.0, motif_at=motif_at, recreate=recreate,
                          follow_signature=follow_signature)
     from .engines.graph.engine import EngineConfig
@@ -113,7 +116,8 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
                    + (f" (styles tried for it: {', '.join(s['styles_tried_for_metre'])})"
                       if s.get("styles_tried_for_metre") else ""))
     if s["engine"] == "streaming":
-        click.echo(f"engine    streaming: {s['segments']} segment(s) of {s['segment_s']:g} s, "
+        ahead = f" (each chosen seeing {s['lookahead_s']:g} s ahead)" if s.get("lookahead_s") else ""
+        click.echo(f"engine    streaming: {s['segments']} segment(s) of {s['segment_s']:g} s{ahead}, "
                    f"{s['transitions']} transitions, median {s['step_s_median'] * 1e3:.1f} ms per segment")
     else:  # the other engines see the whole song at once
         click.echo(f"engine    {s['engine']}: the whole song at once, {s['transitions']} transitions, "

@@ -15,7 +15,8 @@ each engine dances with the product defaults, and ``evaluate`` scores it:
 
 The raw mocap row scores each clip of the styles danced against its own motion
 beats (it has no music); the paper row is the streaming engine with Xu et al.'s objective and
-graph as printed (``--paper``). Means over songs per engine; per song in the JSON.
+graph as printed (``--paper``); the lookahead row is the streaming engine with ``--lookahead 5``
+(opt-in, not among the guarded engines). Means over songs per engine; per song in the JSON.
 """
 
 from __future__ import annotations
@@ -27,8 +28,8 @@ import numpy as np
 from .bench_common import MUSIC_DIR, BenchConfig, Progress, load_song, table
 from .bench_quality import at_fps, mean_scores, mocap_scores
 
-ENGINES = ("streaming", "signature", "global", "choreography", "random_walk", "paper")
-TITLES = {"streaming": "streaming", "signature": "+signature", "global": "global DP",
+ENGINES = ("streaming", "lookahead", "signature", "global", "choreography", "random_walk", "paper")
+TITLES = {"streaming": "streaming", "lookahead": "+lookahead", "signature": "+signature", "global": "global DP",
           "choreography": "choreography", "random_walk": "random walk", "paper": "paper", "mocap": "mocap*"}
 KEYS = ("accent_precision", "accent_precision_chance", "accent_precision_x_chance", "accent_recall",
         "accent_recall_chance", "accent_recall_x_chance", "downbeat_recall", "downbeat_recall_chance",

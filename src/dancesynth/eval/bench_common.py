@@ -65,7 +65,8 @@ class BenchConfig:
     # 7. Visible accents on the beats (bench_accents): every mocap engine on bundled and generated songs.
     accent_songs: tuple[str, ...] | None = None  # bundled songs (None: all)
     accent_generated: bool = True                # also the generated set (groundtruth_quick / _specs apply)
-    accent_engines: tuple[str, ...] = ("streaming", "signature", "global", "choreography", "random_walk", "paper")
+    accent_engines: tuple[str, ...] = ("streaming", "lookahead", "signature", "global", "choreography", "random_walk",
+                                       "paper")
     # 8. Realism (bench_realism): FID_k/FID_g/Div_k/Div_g of every mocap engine against mocap held out of a style.
     realism_style: str | None = None              # None: the largest style
     realism_songs: tuple[str, ...] | None = None  # bundled songs (None: every one ...)

@@ -67,6 +67,7 @@ def engine_dances(music, db, seed: int, engines, style: str | None = GENRE) -> d
     from ..engines.graph.meta_graph import GraphConfig
 
     kinds = {"streaming": dict(follow_signature=True, render=EngineConfig(signature_weight=0.0)),  # counts only
+             "lookahead": dict(follow_signature=True, render=EngineConfig(signature_weight=0.0), lookahead_s=5.0),
              "signature": dict(follow_signature=True), "global": dict(engine="global"),
              "choreography": dict(engine="choreography"), "neural": dict(engine="neural"),
              "paper": dict(graph=GraphConfig.paper(), render=EngineConfig.paper())}  # Xu et al. as printed

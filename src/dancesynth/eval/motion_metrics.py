@@ -29,6 +29,7 @@ DEFAULT_MIN_PROMINENCE_FRAC = 0.05  # of the clip's mean smoothed speed
 DEFAULT_TRANSITION_RADIUS_S = 0.035  # +-2 frames at 60 fps, +-1 at 30 fps
 DEFAULT_CONTACT_HEIGHT_M = 0.05
 EDGE_FPS = 30.0                    # EDGE's PFC measures foot motion per 1/30 s frame
+PFC_WINDOW_S = 5.0                 # ... on 5-second clips, averaged
 _STEADY_M_S2 = 1e-6                # a root accelerating less than this does not accelerate
 _NAN = float("nan")
 
@@ -354,7 +355,7 @@ def foot_skate(motion: MotionClip, *, height_tol_m: float = DEFAULT_CONTACT_HEIG
     return float(speed[contact].mean()) if contact.any() else _NAN
 
 
-def pfc(motion: MotionClip, *, global_rot=None, global_pos=None) -> float:
+def pfc(motion: MotionClip, *, window_s: float | None = PFC_WINDOW_S, global_rot=None, global_pos=None) -> float:
     """Physical Foot Contact score (PFC) of EDGE (Tseng et al., CVPR 2023); lower is better.
 
     EDGE's ``calc_physical_score``: a body whose root accelerates must push against
@@ -371,9 +372,13 @@ def pfc(motion: MotionClip, *, global_rot=None, global_pos=None) -> float:
     frame * fps / 30), so a 30 fps clip scores exactly as in EDGE's code and other
     frame rates are comparable. Differences from EDGE: Y is up (EDGE's SMPL joints
     are Z-up); the foot points are ankle and toe tip (SMPL: ankle and foot joints).
-    0.0 when the root never accelerates (|a| <= 1e-6 m/s^2 throughout: EDGE's code
-    would normalise floating-point noise by itself); NaN below 3 frames. EDGE averages this
-    over many 5-second clips; here it is one clip's value.
+
+    EDGE scores 5-second clips and averages them; so does this, over consecutive
+    ``window_s`` windows (a shorter tail joins the window before it): ``max_t |a|``
+    is a window's, so one hard acceleration does not rescale a whole song. ``None``:
+    the whole clip as one window. A window whose root never accelerates (|a| <= 1e-6
+    m/s^2: EDGE's code would normalise floating-point noise by itself) scores 0.0;
+    NaN below 3 frames.
     """
     check_motion(motion)
     global_rot, global_pos = _posed(motion, global_rot, global_pos)
@@ -381,7 +386,17 @@ def pfc(motion: MotionClip, *, global_rot=None, global_pos=None) -> float:
     if motion.n_frames < 3:
         return _NAN
     fps = motion.fps
-    root = global_pos[:, 0]
+    n = motion.n_frames
+    size = n if window_s is None else max(int(round(float(window_s) * fps)), 3)
+    starts = list(range(0, n, size))
+    if len(starts) > 1 and n - starts[-1] < size:
+        starts.pop()  # the short tail joins the window before it
+    bounds = list(zip(starts, starts[1:] + [n]))
+    return float(np.mean([_pfc_window(global_pos[a:b, 0], feet[a:b], fps) for a, b in bounds]))
+
+
+def _pfc_window(root: np.ndarray, feet: np.ndarray, fps: float) -> float:
+    """EDGE's PFC of one window: ``root`` (F, 3) positions, ``feet`` (F, 2, points, 3)."""
     acc = np.diff(root, n=2, axis=0) * fps * fps
     acc[:, 1] = np.maximum(acc[:, 1], 0.0)
     acc = np.linalg.norm(acc, axis=-1)

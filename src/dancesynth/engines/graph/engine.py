@@ -44,6 +44,11 @@ class MusicSegment:
     (K+1,) says which beats are the music's (False: a subdivision, when a slow song is
     danced at double time). ``beat_count`` (K+1,) counts the music's beats at each of
     them (``BeatGrid.count``; None: each is one music beat), for the accent timing.
+
+    ``ahead``: the last ``ahead`` of the K intervals are music still to come, searched
+    but not danced (a receding horizon: the segment is chosen knowing what follows it,
+    where the music is known, as a file's is); ``remaining_beats`` counts from the end
+    of the danced part.
     """
 
     beat_times_s: np.ndarray
@@ -54,6 +59,7 @@ class MusicSegment:
     beats_per_bar: int | None = None
     music_beat: np.ndarray | None = None
     beat_count: np.ndarray | None = None
+    ahead: int = 0
 
 
 @dataclass(frozen=True)
@@ -178,8 +184,9 @@ class GraphEngine:
         """Synthesise and render one music segment."""
         beats = np.asarray(segment.beat_times_s, dtype=np.float64)
         inten = np.asarray(segment.intensity_db, dtype=np.float64)
+        k = len(inten) - segment.ahead  # intervals danced now; the rest is only looked at
         n, mean, m2 = state.n_heard, state.mean_db, state.m2_db
-        for x in inten:  # Welford: the statistics of all music heard so far
+        for x in inten[:k]:  # Welford: the statistics of all music heard so far
             n += 1
             d = x - mean
             mean += d / n
@@ -189,7 +196,7 @@ class GraphEngine:
             start = self.graph.init_nodes if state.start_nodes is None else state.start_nodes
         else:
             start = np.array([state.node])
-        thc = np.inf if segment.remaining_beats is None else float(segment.remaining_beats)
+        thc = np.inf if segment.remaining_beats is None else float(segment.remaining_beats - segment.ahead)
         recent = state.recent if state.recent is not None else np.zeros(self.graph.n_nodes)
         penalty = self.config.repeat_penalty * recent if self.config.repeat_penalty > 0 else None
         counts = state.motif_counts
@@ -205,12 +212,14 @@ class GraphEngine:
         path = search(self.graph, target, np.diff(beats), start_nodes=start,
                       prev_duration_s=state.prev_duration_s, thc=thc, node_penalty=penalty,
                       steps=self.steps, intensity_weight=self.config.intensity_weight,
-                      **self._beat_costs(bars, segment.music_beat))
+                      **self._beat_costs(bars, segment.music_beat)).first(k)
+        beats, bars = beats[:k + 1], None if bars is None else bars[:k + 1]
+        count = None if segment.beat_count is None else segment.beat_count[:k + 1]
         decay = 0.5 ** (1.0 / self.config.repeat_half_life_beats)
-        recent = recent * decay ** len(inten)
-        np.add.at(recent, path.nodes[1:], decay ** np.arange(len(inten) - 1, -1, -1))
+        recent = recent * decay ** k
+        np.add.at(recent, path.nodes[1:], decay ** np.arange(k - 1, -1, -1))
         t1 = time.perf_counter()
-        pieces = pieces_from_path(self.graph, path, beats, segment.beat_count,
+        pieces = pieces_from_path(self.graph, path, beats, count,
                                   self.config.beat_ease(len(beats), bars, segment.beats_per_bar))
         last = segment.end_s is not None
         stitch, frames = render(

@@ -43,6 +43,10 @@ class Path:
     def n_steps(self) -> int:
         return len(self.via)
 
+    def first(self, k: int) -> "Path":
+        """The first ``k`` steps (a receding horizon commits these and searches the rest again)."""
+        return Path(self.nodes[:k + 1], self.via[:k], self.jump[:k], self.cost)
+
 
 def _rate_factor(rho: np.ndarray, prev_duration: float | None, duration: float) -> np.ndarray:
     """Eq. (6): s = max(r1/r2, r2/r1) with r1/r2 = rho * duration / prev_duration."""
