@@ -73,11 +73,15 @@ def segment_bounds(times_s: np.ndarray, segment_s: float) -> list[tuple[int, int
     """Cut a beat grid into segments of at most ``segment_s`` (at least one interval each)."""
     bounds, b, last = [], 0, len(times_s) - 1
     while b < last:
-        e = int(np.searchsorted(times_s, times_s[b] + segment_s + 1e-9, side="right") - 1)
-        e = min(max(e, b + 1), last)
+        e = min(max(last_beat_within(times_s, b, segment_s), b + 1), last)
         bounds.append((b, e))
         b = e
     return bounds
+
+
+def last_beat_within(times_s: np.ndarray, b: int, seconds: float) -> int:
+    """Index of the last beat at most ``seconds`` after beat ``b``."""
+    return int(np.searchsorted(times_s, times_s[b] + seconds + 1e-9, side="right") - 1)
 
 
 def synthesise(engine: GraphEngine, grid: BeatGrid, duration_s: float, config: DanceConfig,
@@ -99,9 +103,7 @@ def synthesise(engine: GraphEngine, grid: BeatGrid, duration_s: float, config: D
         last = i == len(bounds) - 1
         # A file's music is all known: each segment is searched with what follows it in view
         # (a receding horizon) and only its own beats are danced.
-        a = min(int(np.searchsorted(grid.times_s, grid.times_s[e] + config.lookahead_s + 1e-9, side="right")) - 1,
-                grid.n_intervals) if config.lookahead_s > 0 else e
-        a = max(a, e)
+        a = max(e, min(last_beat_within(grid.times_s, e, config.lookahead_s), grid.n_intervals))
         seg = MusicSegment(grid.times_s[b:a + 1], grid.intensity_db[b:a],
                            remaining_beats=grid.n_intervals - e, end_s=duration_s if last else None,
                            bar_position=bars[b:a + 1], beats_per_bar=beats_per_bar,

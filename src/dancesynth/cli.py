@@ -66,8 +66,8 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
 
     output = output or Path(song.stem + ".bvh")
     bvh_output(output)
-    config = DanceConfig(style=style, engine=engine, segment_s=segment_seconds, lookahead_s=lookahead, fps=fps, seed=seed,
-                         max_duration_s=max_minutes * 60.0, motif_at=motif_at, recreate=recreate,
+    config = DanceConfig(style=style, engine=engine, segment_s=segment_seconds, lookahead_s=lookahead, fps=fps,
+                         seed=seed, max_duration_s=max_minutes * 60.0, motif_at=motif_at, recreate=recreate,
                          follow_signature=follow_signature)
     from .engines.graph.engine import EngineConfig
     from .engines.graph.meta_graph import GraphConfig
