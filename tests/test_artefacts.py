@@ -94,6 +94,59 @@ def test_a_snap_the_source_makes_smaller_is_the_sources_own_played_faster():
     assert new_steps(dance, source).tolist() == [[29, 2]]
 
 
+# -- feet_vs_source -----------------------------------------------------------------------------------------------
+
+
+def _salsa_as_danced(bundled_db, seconds: float = 12.0):
+    """A salsa clip played as captured at 30 fps (every 2nd frame of 60), with its flat source frames."""
+    from dataclasses import replace
+
+    st = bundled_db.styles["salsa-120-150bpm"]
+    clips = [st.clip(c) for c in range(st.n_clips)]
+    frames = np.arange(0, int(seconds * st.fps), 2)
+    clip = clips[1]
+    dance = replace(clip, fps=30.0, local_rot=clip.local_rot[frames], root_pos=clip.root_pos[frames], contacts=None,
+                    meta={})
+    return dance, frames + int(st.clip_starts[1]), clips, st.clip_starts
+
+
+def test_a_dance_that_plays_its_source_as_captured_adds_nothing_to_the_feet(bundled_db):
+    from dancesynth.eval.artefacts import feet_vs_source
+
+    dance, source, clips, starts = _salsa_as_danced(bundled_db)
+    r = feet_vs_source(dance, source, clips, starts)
+    assert r["share"] == 1.0
+    assert r["foot_skate_vs_source"] == pytest.approx(1.0, abs=1e-9)
+    assert r["pfc_vs_source"] == pytest.approx(1.0, abs=1e-9)
+
+
+def test_feet_slid_by_the_rendering_show_against_the_source(bundled_db):
+    from dataclasses import replace
+
+    from dancesynth.eval.artefacts import feet_vs_source
+
+    dance, source, clips, starts = _salsa_as_danced(bundled_db)
+    t = np.arange(dance.n_frames) / dance.fps
+    slid = dance.root_pos.copy()
+    slid[:, 0] += 0.08 * np.sin(2 * np.pi * 1.5 * t)  # the whole body, feet too, swept 8 cm to and fro
+    r = feet_vs_source(replace(dance, root_pos=slid), source, clips, starts)
+    assert r["foot_skate_vs_source"] > 1.3 and r["pfc_vs_source"] > 1.3
+
+
+def test_runs_end_at_cuts_and_short_runs_are_left_out(bundled_db):
+    from dancesynth.eval.artefacts import feet_vs_source
+
+    dance, source, clips, starts = _salsa_as_danced(bundled_db)
+    cut = source.copy()
+    cut[200:] -= 300          # a jump back in the source at frame 200 (6.7 s) ...
+    cut[320:] += 600          # ... and forward at 320: a 4 s run in between
+    r = feet_vs_source(dance, cut, clips, starts, min_run_s=5.0)
+    assert r["share"] == pytest.approx(200 / dance.n_frames)  # the middle and last runs are too short
+    assert feet_vs_source(dance, cut, clips, starts, min_run_s=100.0)["foot_skate_vs_source"] is None
+    with pytest.raises(InputError, match="one source frame per dance frame"):
+        feet_vs_source(dance, source[:-1], clips, starts)
+
+
 # -- hand_in_head_frames -----------------------------------------------------------------------------------------
 
 

@@ -1,4 +1,5 @@
-"""Visible artefacts of a rendered motion: one-frame snaps and hands inside the head.
+"""Visible artefacts of a rendered motion: one-frame snaps, hands inside the head, and the
+foot sliding a dance adds to the source frames it plays.
 
 Pure functions of the motion (no files, no printing), in the style of
 ``motion_metrics``: they take a ``MotionClip`` and return arrays or numbers. The
@@ -12,9 +13,10 @@ import numpy as np
 from .. import rotations as rot
 from ..errors import InputError
 from ..kinematics import clip_fk
+from ..motion.resample import resample_clip_arrays
 from ..motion.roles import find_roles
 from ..types import MotionClip
-from .motion_metrics import check_motion
+from .motion_metrics import check_motion, foot_skate, pfc
 
 #: A snap's neighbouring frame pairs may turn the joint at most this share of the snap.
 CALM_FRACTION = 1.0 / 3.0
@@ -23,6 +25,9 @@ DEFAULT_STEP_DEG = 30.0
 #: so a source turning a joint by half the dance's snap over the same frame pair explains it.
 SOURCE_SHARE = 0.5
 DEFAULT_HEAD_RADIUS_M = 0.08  # about half an adult head's width
+#: A run of a dance that plays one source clip forward, without a cut, counts when it lasts this long
+#: (PFC and floor speed need some seconds to mean anything).
+MIN_RUN_S = 1.0
 
 
 def joint_steps_deg(local_rot) -> np.ndarray:
@@ -148,6 +153,60 @@ def hand_in_head_frames(motion: MotionClip, *, radius_m: float | None = DEFAULT_
                              f"got {radius_m!r}")
     dist = np.linalg.norm(pos[:, wrists] - centre[:, None], axis=-1)
     return float(np.mean((dist < radius).any(axis=1)))
+
+
+def feet_vs_source(motion: MotionClip, source_frames, clips, clip_starts, *, min_run_s: float = MIN_RUN_S) -> dict:
+    """Floor foot speed and PFC of a dance beside the same source frames played as captured.
+
+    A dance's feet can slide because of the pieces it picks (a style's hops and slides)
+    or because of what rendering does to them (time warp, accent timing, blends, the foot
+    lock). The style's average mocap mixes both; this isolates the second. The dance is
+    cut into runs that play one source clip forward without a cut (``source_frames`` (F,),
+    flat source frame shown at each frame, as ``meta["source_frames"]``; ``clips`` the
+    source clips as ``MotionClip`` in flat order, ``clip_starts`` their first flat frames,
+    with one more entry at the end), each run at least ``min_run_s`` long. Each run is
+    scored, and so are the source frames it spans at the source's own speed; the means are
+    weighted by run length. Returns ``foot_skate`` and ``pfc`` for the dance, the same for
+    the source (``source_``), their ratios (``_vs_source``), and the share of the dance's
+    frames the runs cover. Values are None when no run is long enough.
+    """
+    from dataclasses import replace
+
+    check_motion(motion)
+    src = np.asarray(source_frames, dtype=np.float64)
+    if src.shape != (motion.n_frames,):
+        raise InputError(f"source_frames needs one source frame per dance frame ({motion.n_frames}), "
+                         f"got shape {src.shape}")
+    starts = np.asarray(clip_starts, dtype=np.int64)
+    step = clips[0].fps / motion.fps if clips else 1.0
+    cut = np.flatnonzero((np.diff(src) <= 0) | (np.diff(src) > 2.5 * step)) + 1
+    rows = []
+    for run in np.split(np.arange(motion.n_frames), cut):
+        if len(run) < max(min_run_s * motion.fps, 3):
+            continue
+        a, b = int(np.floor(src[run[0]])), int(np.ceil(src[run[-1]])) + 1
+        c = int(np.searchsorted(starts, a, side="right") - 1)
+        if c < 0 or c >= len(clips) or b > starts[c + 1]:
+            continue  # a run that crosses clips is not one captured take
+        whole, i, j = clips[c], a - starts[c], b - starts[c]
+        # At the dance's frame rate: speeds and PFC by finite differences depend on it.
+        local, root, _ = resample_clip_arrays(whole.local_rot[i:j], whole.root_pos[i:j], None, whole.fps, motion.fps)
+        raw = replace(whole, fps=motion.fps, local_rot=local, root_pos=root, contacts=None, meta={})
+        part = replace(motion, local_rot=motion.local_rot[run[0]:run[-1] + 1],
+                       root_pos=motion.root_pos[run[0]:run[-1] + 1], contacts=None, meta={})
+        rows.append((len(run), foot_skate(part), pfc(part), foot_skate(raw), pfc(raw)))
+    rows = [r for r in rows if all(np.isfinite(r[1:]))]
+    out = {"foot_skate": None, "pfc": None, "source_foot_skate": None, "source_pfc": None,
+           "foot_skate_vs_source": None, "pfc_vs_source": None,
+           "share": float(sum(r[0] for r in rows) / motion.n_frames) if rows else 0.0}
+    if not rows:
+        return out
+    w = np.array([r[0] for r in rows], dtype=np.float64)
+    mean = [float(np.average([r[i] for r in rows], weights=w)) for i in (1, 2, 3, 4)]
+    out.update(foot_skate=mean[0], pfc=mean[1], source_foot_skate=mean[2], source_pfc=mean[3],
+               foot_skate_vs_source=mean[0] / mean[2] if mean[2] > 0 else None,
+               pfc_vs_source=mean[1] / mean[3] if mean[3] > 0 else None)
+    return out
 
 
 def _local_rot(motion) -> np.ndarray:

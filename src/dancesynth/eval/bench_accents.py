@@ -36,7 +36,7 @@ KEYS = ("accent_precision", "accent_precision_chance", "accent_precision_x_chanc
         "bar_accent_on_downbeat", "bar_accent_chance", "warp_in_range", "intensity_spearman",
         "transition_jump_vs_mocap_p99", "worst_transition_jump_vs_mocap_p99", "jump_p99_vs_mocap",
         "joint_speed_p99_vs_mocap", "root_travel_vs_mocap", "foot_skate_m_s", "foot_skate_vs_mocap", "pfc",
-        "pfc_vs_mocap", "one_frame_steps")
+        "pfc_vs_mocap", "foot_skate_vs_source", "pfc_vs_source", "source_share", "one_frame_steps")
 LABELS = {"accent_precision": "precision: kinematic beats on a beat (±50 ms)",
           "accent_precision_chance": "  chance (circular shift)", "accent_precision_x_chance": "  × chance",
           "accent_recall": "recall: beats with a kinematic beat (±50 ms)",
@@ -54,6 +54,9 @@ LABELS = {"accent_precision": "precision: kinematic beats on a beat (±50 ms)",
           "pfc": "foot contact score PFC (EDGE)",
           "foot_skate_vs_mocap": "  / the style's mocap's (guard ≤ 1.1)",
           "pfc_vs_mocap": "  / the style's mocap's (guard ≤ 1.1)",
+          "foot_skate_vs_source": "floor foot speed / the same source frames' as captured",
+          "pfc_vs_source": "PFC / the same source frames' as captured",
+          "source_share": "  share of the dance in uncut runs of 1 s or more (those compared)",
           "one_frame_steps": "one-frame joint steps > 30° not in the source (total)"}
 MOCAP_NOTE = ("* mocap: each clip of the styles danced, against its own motion beats (no music, no bars, "
               "no loudness, no transitions); its one-frame steps are its own capture glitches, per clip")
@@ -92,9 +95,9 @@ def _default_cache() -> Path:
     return cache_dir() / "groundtruth"
 
 
-def _score(clip, song: dict, reference, style) -> dict:
+def _score(clip, song: dict, reference, style, source_clips: list) -> dict:
     from ..motion.resample import sample_frames
-    from .artefacts import new_steps
+    from .artefacts import feet_vs_source, new_steps
     from .evaluate import evaluate
 
     jumps = np.asarray(clip.meta.get("transition_times_s", []), dtype=float)
@@ -109,6 +112,10 @@ def _score(clip, song: dict, reference, style) -> dict:
     shown, _, _ = sample_frames(style.local_rot, style.root_pos, np.asarray(clip.meta["source_frames"]))
     cut = np.round(jumps * clip.fps).astype(np.int64)
     r["one_frame_steps"] = int(len(new_steps(clip, shown, cuts=np.r_[cut - 1, cut])))
+    # What rendering adds to the feet, apart from which pieces were picked.
+    feet = feet_vs_source(clip, clip.meta["source_frames"], source_clips, style.clip_starts)
+    r.update(foot_skate_vs_source=feet["foot_skate_vs_source"], pfc_vs_source=feet["pfc_vs_source"],
+             source_share=feet["share"])
     return r
 
 
@@ -117,7 +124,7 @@ def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
     from .evaluate import mocap_reference
 
     songs = _songs(cfg, progress)
-    clips_by_style, refs = {}, {}
+    clips_by_style, refs, sources = {}, {}, {}
     per_song = []
     for i, song in enumerate(songs):
         if progress:
@@ -129,7 +136,10 @@ def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
                 clips_by_style[key] = [at_fps(db.styles[key[0]].clip(c), clip.fps)
                                        for c in range(db.styles[key[0]].n_clips)]
                 refs[key] = mocap_reference(clips_by_style[key], clip.fps)
-            scores[name] = _score(clip, song, refs[key], db.styles[key[0]])
+            st = db.styles[key[0]]
+            if st.name not in sources:
+                sources[st.name] = [st.clip(c) for c in range(st.n_clips)]
+            scores[name] = _score(clip, song, refs[key], st, sources[st.name])
             styles[name] = clip.meta["style"]
         per_song.append({"song": song["name"], "set": song["set"], "tempo_bpm": song["music"].tempo_bpm,
                          "beats_per_bar": song["beats_per_bar"], "styles": styles, "scores": scores})
