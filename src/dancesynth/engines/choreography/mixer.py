@@ -52,7 +52,9 @@ class MixerConfig:
                                    # velocity) a stitch leaves for the blend to glide the body across
     foot_lock: bool = True
     unlock_s: float = 0.15         # a foot moved by a stitch is free this long (see ``_released``)
-    unlock_tol_m: float = 0.05
+    unlock_tol_m: float = 0.3      # ... if it moves more than this. At 0.05 most stitches freed the feet while
+                                   # the blend glided the body: PFC 1.49 / 1.43x the mocap's, 0.88 / 1.02x now
+                                   # (the foot lock never pulls a foot more than 0.1 m; beyond, it slides)
     accent_window: float = 0.35    # show each word's beats at their visible stops (motion.accents; 0 = off)
     accent: AccentCosts | None = AccentCosts()  # prefer words that stop on their beats and not between
     ease_beats: float = 0.3        # accent timing on each music beat (engines.stitch.ease; 0 = off)
