@@ -8,6 +8,8 @@ floor artefact (feet below the floor) is ``motion_metrics.ground_penetration``.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from .. import rotations as rot
@@ -170,8 +172,6 @@ def feet_vs_source(motion: MotionClip, source_frames, clips, clip_starts, *, min
     the source (``source_``), their ratios (``_vs_source``), and the share of the dance's
     frames the runs cover. Values are None when no run is long enough.
     """
-    from dataclasses import replace
-
     check_motion(motion)
     src = np.asarray(source_frames, dtype=np.float64)
     if src.shape != (motion.n_frames,):

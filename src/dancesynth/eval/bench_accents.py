@@ -28,7 +28,6 @@ import numpy as np
 from .bench_common import MUSIC_DIR, BenchConfig, Progress, load_song, table
 from .bench_quality import at_fps, mean_scores, mocap_scores
 
-ENGINES = ("streaming", "lookahead", "signature", "global", "choreography", "random_walk", "paper")
 TITLES = {"streaming": "streaming", "lookahead": "+lookahead", "signature": "+signature", "global": "global DP",
           "choreography": "choreography", "random_walk": "random walk", "paper": "paper", "mocap": "mocap*"}
 KEYS = ("accent_precision", "accent_precision_chance", "accent_precision_x_chance", "accent_recall",
