@@ -179,11 +179,26 @@ def metre_summary(clip: MotionClip, music: MusicFeatures, warnings: list) -> dic
 
 def dance_period(clip: MotionClip, music: MusicFeatures) -> int | None:
     """The period (2, 3 or 4 beats) at which the dance's kinetic energy per music beat repeats most."""
+    return _period_strengths(clip, music)[0]
+
+
+def _period_strengths(clip: MotionClip, music: MusicFeatures) -> tuple[int | None, dict[int, float]]:
     from .eval.beat_metrics import dominant_beat_period
     from .eval.motion_metrics import beat_interval_energy
 
     energy = beat_interval_energy(clip, music.beat_times_s)
-    return dominant_beat_period(energy[np.isfinite(energy)])[0]
+    return dominant_beat_period(energy[np.isfinite(energy)])
+
+
+#: How much more the dance's energy must repeat at 3 beats than at 2 or 4 for a style to count as
+#: dancing a waltz in three (autocorrelation): a tie is a coin flip that the next reading may lose.
+IN_THREE_MARGIN = 0.05
+
+
+def dances_in_three(clip: MotionClip, music: MusicFeatures) -> bool:
+    period, strength = _period_strengths(clip, music)
+    others = [r for lag, r in strength.items() if lag != 3]
+    return period == 3 and (not others or strength[3] >= max(others) + IN_THREE_MARGIN)
 
 
 def _graph_dance(music: MusicFeatures, db: MotionDatabase, config: DanceConfig, name: str, timings: dict,
@@ -192,8 +207,9 @@ def _graph_dance(music: MusicFeatures, db: MotionDatabase, config: DanceConfig, 
 
     The style and metrical level are those that warp the beat pieces least (engines/beatgrid.py).
     A song in three is danced in three where the database allows it: when the first style's
-    dance repeats in twos or fours, the next style that fits the tempo as well is tried (some
-    styles' moves bend to a waltz's bars, others keep their fours), then styles that still play
+    dance does not clearly repeat in threes (``dances_in_three``), the next style that fits the
+    tempo as well is tried (some styles' moves bend to a waltz's bars, others keep their fours),
+    then styles that still play
     ``METRE_SHARE`` of the pieces within the natural rates, and the first dance is kept when none
     dances in three."""
     waltz = music.beats_per_bar == 3 and music.n_beats >= 4
@@ -201,11 +217,11 @@ def _graph_dance(music: MusicFeatures, db: MotionDatabase, config: DanceConfig, 
     timings["database_s"] = time.perf_counter() - t
     clip = _graph_dance_fit(fits[0], music, db, config, name, timings, progress)
     tried = [fits[0].style.name]
-    if waltz and dance_period(clip, music) != 3:
+    if waltz and not dances_in_three(clip, music):
         for fit in fits[1:]:
             other = _graph_dance_fit(fit, music, db, config, name, dict(timings), progress)
             tried.append(fit.style.name)
-            if dance_period(other, music) == 3:
+            if dances_in_three(other, music):
                 clip = other
                 break
     if len(tried) > 1:

@@ -1,12 +1,14 @@
 """Keep planted feet where the source motion kept them.
 
-Time-warping never makes a foot slide: it only changes when a pose is shown. Blending
-across a jump does, because the pose is pulled from the old motion towards the new.
-So while the source says a foot is in contact, the ankle is made to follow the
-source's own horizontal ankle motion from where the contact began (the source's
-pivots and slides stay; the drift the blend adds goes), by two-bone leg IK; its
-height stays the shown motion's, so a foot a blend carries down onto the floor is
-not held in the air.
+Blending across a jump makes a foot slide, because the pose is pulled from the old
+motion towards the new; and the capture's own planted feet drift (a contact is any
+foot near the floor moving under 0.35 m/s), which time-warping a piece faster only
+speeds up. So while the source says a foot is in contact, the ankle is held where
+the contact began, by two-bone leg IK (``follow_source`` > 0 lets it follow that share
+of the source's own horizontal ankle motion instead: 1 keeps the capture's drift and
+removes only what the blend adds, the behaviour before 2026-12-02). Its height stays
+the shown motion's, so a foot a blend carries down onto the floor is not held in the
+air.
 
 Any jump in the correction is a jump of the whole leg on screen, so it is kept
 continuous:
@@ -73,6 +75,7 @@ class LockParams:
     grip_s: float = 0.1
     ease_s: float = 0.15
     pole_weight: float = 0.3   # how firmly the knee is kept over the toes (two_bone_ik): mocap knees stray
+    follow_source: float = 0.0  # share of the source's own foot motion kept during a contact
 
 
 def _released(x0, v0, at, length, fps):
@@ -96,7 +99,7 @@ def _track_foot(foot: dict, contacts, new_run, ankle, raw, fps: float, p: LockPa
                 f.update(locked=1.0, target=ankle[t] + carry, release_len=0.0, held=0.0)
             else:
                 f["held"] += 1.0
-                own = 0.0 if new_run[t] else raw[t] - f["raw_prev"]  # the source's own foot motion
+                own = 0.0 if new_run[t] else p.follow_source * (raw[t] - f["raw_prev"])  # the source's own
                 slip = max(0.0, 1.0 - f["held"] / grip)
                 f["target"] = f["target"] + own + slip * (ankle[t] - f["ankle_prev"] - own)
             f["target"][1] = ankle[t, 1]  # the foot's place on the floor is held, its height is the motion's

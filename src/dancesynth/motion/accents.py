@@ -12,7 +12,7 @@ beats (the dance scores 1.2-2x chance).
 frame the renderer then puts on the music beat) and says, per beat, how visible
 that stop is and how strongly the motion up to the next beat stops *between*
 beats. The graph search uses both to prefer beat pieces that stop on their beats
-and nowhere else.
+and nowhere else, and ``foot_slide`` to prefer pieces whose feet stay put.
 """
 
 from __future__ import annotations
@@ -23,7 +23,12 @@ import numpy as np
 
 from .. import rotations as rot
 from ..kinematics import fk
+from ..types import MotionClip
 from .beats import kinematic_beats, summed_speed
+from .features import foot_points
+from .roles import find_roles
+
+FLOOR_TOL_M = 0.05  # a foot this close to the floor counts as on it (the evaluation's contact height)
 
 
 @dataclass(frozen=True)
@@ -33,6 +38,7 @@ class AccentBeats:
     frame: np.ndarray      # (B,) int64 frame of the beat's visible stop (the beat frame where there is none)
     strength: np.ndarray   # (B,) prominence of that stop, 1 = the style's median stop, 0 = none
     offbeat: np.ndarray    # (B,) summed strength of the stops between this beat and the next in its clip
+    slide: np.ndarray      # (B,) how much the piece to the next beat slides its feet (``foot_slide``), 1 = mean
 
 
 @dataclass(frozen=True)
@@ -41,13 +47,15 @@ class AccentCosts:
 
     Added to a step's cost: ``unaccented * (1 - strength)`` when the node it arrives at
     shows no clear stop (``strength`` 1 = the style's median stop), ``offbeat * min(s, 2)``
-    for the stops ``s`` its piece makes between beats, and ``warp`` per unit of
+    for the stops ``s`` its piece makes between beats, ``slide`` times the piece's foot
+    sliding (``foot_slide``, 1 = the style's mean piece) where it is known, and ``warp`` per unit of
     ``|ln rate|`` beyond ``free_warp`` (a piece played much faster or slower than
     captured looks wrong and moves its stops), ``far_warp`` more beyond 0.8-1.25x.
     """
 
     unaccented: float = 1.0
     offbeat: float = 1.0
+    slide: float = 0.0
     warp: float = 6.0
     free_warp: float = 0.1
     far_warp: float = 10.0       # and this much more per unit of |ln rate| beyond ``warp_limit``
@@ -59,9 +67,13 @@ class AccentCosts:
         return (self.warp * np.maximum(off - self.free_warp, 0.0)
                 + self.far_warp * np.maximum(off - self.warp_limit, 0.0))
 
-    def beat_costs(self, strength: np.ndarray, offbeat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def beat_costs(self, strength: np.ndarray, offbeat: np.ndarray,
+                   slide: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Per beat: the cost of arriving at it, and of playing the piece from it to the next."""
-        return self.unaccented * np.maximum(1.0 - strength, 0.0), self.offbeat * np.minimum(offbeat, 2.0)
+        played = self.offbeat * np.minimum(offbeat, 2.0)
+        if slide is not None and self.slide:
+            played = played + self.slide * slide
+        return self.unaccented * np.maximum(1.0 - strength, 0.0), played
 
 
 def visible_accents(style) -> tuple[np.ndarray, np.ndarray]:
@@ -98,7 +110,7 @@ def accent_beats(style, *, window: float = 0.35, margin: float = 0.15) -> Accent
     strength = np.zeros(n)
     offbeat = np.zeros(n)
     if n < 2:
-        return AccentBeats(out, strength, offbeat)
+        return AccentBeats(out, strength, offbeat, np.zeros(n))
     acc, prom = visible_accents(style)
     if acc.size:
         prom = prom / max(float(np.median(prom)), 1e-9)
@@ -133,7 +145,46 @@ def accent_beats(style, *, window: float = 0.35, margin: float = 0.15) -> Accent
             edge = margin * period[i]
             a, b = np.searchsorted(acc, [out[i] + edge, out[i + 1] - edge], side="right")
             offbeat[i] = prom[a:b].sum() if b > a else 0.0
-    return AccentBeats(out, strength, offbeat)
+    slide = np.zeros(n)
+    per_frame = np.r_[0.0, np.cumsum(foot_slide(style))]
+    span = np.where(same_next, np.r_[np.diff(out), 0], 0)
+    ok = span > 0
+    slide[ok] = (per_frame[out[ok] + span[ok]] - per_frame[out[ok]]) / span[ok]
+    if ok.any() and slide[ok].mean() > 0:
+        slide /= slide[ok].mean()
+    return AccentBeats(out, strength, offbeat, slide)
+
+
+def foot_slide(style) -> np.ndarray:
+    """(F,) per frame of ``style``: the foot motion a foot lock cannot hold, each term 1 = its style mean.
+
+    The renderer holds a planted foot (``style.contacts``) where it landed, so what a viewer
+    still sees slide is a foot near the floor that the capture does not call planted (its
+    horizontal speed, the floor foot speed the evaluation measures) and both feet moving
+    while the body accelerates (the product EDGE's PFC scores). The floor is the clip's
+    median lowest foot point, as the evaluation takes it.
+    """
+    sk, fps = style.skeleton, style.fps
+    roles = find_roles(sk)
+    low_speed = np.zeros(style.n_frames)
+    both = np.zeros(style.n_frames)
+    for c in range(style.n_clips):
+        a, b = int(style.clip_starts[c]), int(style.clip_starts[c + 1])
+        if b - a < 3:
+            continue
+        local, root = style.local_rot[a:b].astype(np.float64), style.root_pos[a:b].astype(np.float64)
+        g_rot, g_pos = fk(local, root, sk.offsets, sk.parents)
+        feet = foot_points(MotionClip(sk, fps, root, local), roles, g_rot, g_pos)
+        speed = np.linalg.norm(np.gradient(feet[..., [0, 2]], axis=0), axis=-1).min(axis=2) * fps  # (F, 2)
+        height = feet[..., 1].min(axis=2)
+        free = ~np.asarray(style.contacts[a:b], dtype=bool)
+        low = height <= np.median(height.min(axis=1)) + FLOOR_TOL_M
+        low_speed[a:b] = np.where(low & free, speed, 0.0).sum(axis=1)
+        accel = np.gradient(np.gradient(root, axis=0), axis=0) * fps * fps
+        accel[:, 1] = np.maximum(accel[:, 1], 0.0)  # falling needs no support
+        loose = np.where(free, speed, 0.0)
+        both[a:b] = loose[:, 0] * loose[:, 1] * np.linalg.norm(accel, axis=1)
+    return low_speed / max(low_speed.mean(), 1e-9) + both / max(both.mean(), 1e-9)
 
 
 def cached_accent_beats(style, *, window: float = 0.35) -> AccentBeats:
@@ -152,14 +203,14 @@ def cached_accent_beats(style, *, window: float = 0.35) -> AccentBeats:
     path = cache_dir() / "accents" / f"{style.name}-{style.fingerprint}-{window:g}-{code}.npz"
     try:
         with np.load(path) as z:
-            return AccentBeats(z["frame"], z["strength"], z["offbeat"])
+            return AccentBeats(z["frame"], z["strength"], z["offbeat"], z["slide"])
     except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):
         pass  # not cached yet, or unreadable: compute below
     out = accent_beats(style, window=window)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_output(path, "wb") as fh:
-            np.savez(fh, frame=out.frame, strength=out.strength, offbeat=out.offbeat)
+            np.savez(fh, frame=out.frame, strength=out.strength, offbeat=out.offbeat, slide=out.slide)
     except OSError:
         pass  # a read-only cache only costs the analysis next time
     return out

@@ -109,6 +109,7 @@ class MetaMotionGraph:
     node_accent_frame: np.ndarray = None
     node_accent: np.ndarray = None
     edge_offbeat: np.ndarray = None
+    edge_slide: np.ndarray = None   # how much the piece to the successor slides its feet (1 = the style's mean)
 
     @property
     def n_nodes(self) -> int:
@@ -285,6 +286,7 @@ def build_graph(style: Style, config: GraphConfig = GraphConfig()) -> MetaMotion
         prev_node=prev_node, w1=w1, w1_z=w1_z, bi_src=src, bi_dst=dst, bi_rd=rd_e.astype(np.float64),
         capacity=np.zeros(n), init_nodes=np.flatnonzero(np.r_[True, clip[1:] != clip[:-1]]), thr=config.thr)
     graph.node_accent_frame, graph.node_accent, graph.edge_offbeat = accents.frame, accents.strength, accents.offbeat
+    graph.edge_slide = accents.slide
     derive_steps(graph, config.prune_trap_cycles)
 
     if config.close_dead_ends and not np.isinf(graph.capacity[graph.init_nodes]).any():

@@ -150,7 +150,7 @@ class StepCosts:
         played = np.zeros(graph.n_nodes)  # cost of playing the mono edge leaving a node
         self.warp = None
         if accent is not None and graph.node_accent is not None:
-            arrive, played = accent.beat_costs(graph.node_accent, graph.edge_offbeat)
+            arrive, played = accent.beat_costs(graph.node_accent, graph.edge_offbeat, graph.edge_slide)
             self.warp = accent.warp_cost
             self.log_s = np.log(np.maximum(graph.frames_to_next(), 1.0) / graph.fps)  # seconds each edge plays
         self.m_src, self.m_dst = graph.step_src[m], graph.step_dst[m]
