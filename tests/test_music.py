@@ -375,3 +375,21 @@ def test_bundled_songs_default_tracker_agrees_with_librosa(path):
         assert ours.tempo_bpm == pytest.approx(theirs.tempo_bpm, rel=0.03)
         assert beat_f_measure(theirs.beat_times_s, ours.beat_times_s) >= 0.6
     assert not ours.default_tempo and not theirs.default_tempo
+
+
+def test_a_melody_recording_cut_while_its_last_note_sounds(tmp_path):
+    """Issue 13: ``conduct`` crashed with an IndexError on 2 of 3 real recordings: a note heard to the
+    end of the file was measured past the signal's last sample."""
+    import soundfile as sf
+
+    from dancesynth.music.melody import audio_notes
+
+    sr = 22050
+    t = np.arange(int(6.2 * sr)) / sr  # ends halfway through a 0.4 s note
+    freq = np.array([440, 494, 523, 587, 659, 698, 784, 880])[(t / 0.4).astype(int) % 8]
+    y = 0.5 * np.sin(2 * np.pi * np.cumsum(freq) / sr)
+    y[(t % 0.4) < 0.01] *= 0.2  # a small dip at each note's start, as a new note's attack
+    sf.write(tmp_path / "scale.wav", y.astype(np.float32), sr)
+    notes = audio_notes(tmp_path / "scale.wav")
+    assert notes.n_notes >= 10 and np.all(np.isfinite(notes.intensity))
+    assert set(np.unique(notes.pitch)) <= {69, 71, 72, 74, 76, 77, 79, 81}

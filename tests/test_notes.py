@@ -134,3 +134,51 @@ def test_bad_midi_files_get_clear_errors(tmp_path, case, message):
     with pytest.raises(InputError, match=message) as info:
         midi_notes(path)
     assert "\n" not in str(info.value)
+
+
+def _hostile_song(path, *, ticks_per_beat=96, gap=48, tempo=500000, signature=None):
+    """A 4-note melody whose file states the given tempo, time signature and note gaps."""
+    mid = mido.MidiFile(type=0, ticks_per_beat=ticks_per_beat)
+    tr = mido.MidiTrack()
+    tr.append(mido.MetaMessage("set_tempo", tempo=tempo))
+    if signature:
+        tr.append(mido.MetaMessage("time_signature", numerator=signature[0], denominator=signature[1]))
+    for i in range(4):
+        tr.append(mido.Message("note_on", note=70 + i, velocity=80, time=0 if i == 0 else gap))
+        tr.append(mido.Message("note_off", note=70 + i, velocity=0, time=gap))
+    mid.tracks.append(tr)
+    mid.save(path)
+    return path
+
+
+@pytest.mark.parametrize("kind, message", [
+    # 1 tick per beat and a 2^27-tick gap: 4 years of music, once a 14 GiB beat grid.
+    ("huge delta", "beyond 15 minutes"),
+    ("tempo 0", "outside 5-1000 bpm"),
+    ("tempo 1 us", "outside 5-1000 bpm"),
+    ("denominator 2^24", "not one music uses"),
+    ("numerator 0", "not one music uses"),
+    ("17 minutes", "over the limit of 15.0 min"),
+])
+def test_hostile_midi_headers_are_refused_before_anything_is_sized_by_them(tmp_path, kind, message):
+    """Issue 13: tiny files that once asked for 14 GiB or danced at 503 million bpm."""
+    path = tmp_path / "hostile.mid"
+    if kind == "huge delta":
+        _hostile_song(path, ticks_per_beat=1, gap=2 ** 27)
+    elif kind == "tempo 0":
+        _hostile_song(path, tempo=0)
+    elif kind == "tempo 1 us":
+        _hostile_song(path, tempo=1)
+    elif kind == "denominator 2^24":
+        _hostile_song(path, signature=(4, 4))
+        # mido only writes powers of two it knows; the file stores the exponent, so patch it to 24.
+        raw = bytearray(path.read_bytes())
+        raw[raw.index(b"\xff\x58\x04") + 4] = 24
+        path.write_bytes(bytes(raw))
+    elif kind == "numerator 0":
+        _hostile_song(path, signature=(0, 4))
+    elif kind == "17 minutes":
+        _hostile_song(path, ticks_per_beat=96, gap=96 * 300)  # 7 gaps of 300 beats at 120 bpm
+    with pytest.raises(InputError, match=message) as info:
+        midi_notes(path, max_duration_s=900.0)
+    assert "\n" not in str(info.value)

@@ -108,8 +108,9 @@ def audio_notes(path, *, max_duration_s: float | None = DEFAULT_MAX_DURATION_S) 
         raise InputError(f"{path}: no melody could be heard ({len(onset_s)} pitched notes found); "
                          "give a recording with a clear tune, or its MIDI file")
     # Loudness of each note, relative to the loudest.
-    a = np.round(onset_s * sr).astype(np.int64)
-    b = np.maximum(np.round((onset_s + sounding_s) * sr).astype(np.int64), a + 1)
+    # A note's samples, clipped to the signal: the pitch track's last frame may end past its last sample.
+    a = np.clip(np.round(onset_s * sr).astype(np.int64), 0, len(y) - 1)
+    b = np.clip(np.round((onset_s + sounding_s) * sr).astype(np.int64), a + 1, len(y))
     energy = np.concatenate(([0.0], np.cumsum(np.square(y, dtype=np.float64))))
     db = rms_db(np.sqrt(np.maximum(energy[b] - energy[a], 0.0) / (b - a)))
     intensity = 127.0 * np.clip((db - (db.max() - DYNAMIC_RANGE_DB)) / DYNAMIC_RANGE_DB, 0.0, 1.0)

@@ -32,6 +32,11 @@ MAX_DURATION_16 = 64.0          # the paper's duration range
 REST_MIN_16 = 2.0               # a silence of an eighth or more after a note is a rest
 STACCATO_FRACTION = 0.5         # sounding for at most half its time, and a quarter note or shorter
 MIN_MELODY_NOTES = 4
+# What a MIDI file may state, checked as it is read, before anything is sized by it: a 79-byte
+# file with a huge delta time or a time signature of x/2^24 must not make a grid of billions of beats.
+TEMPO_RANGE_BPM = (5.0, 1000.0)   # quarter notes per minute of a tempo event
+MAX_DENOMINATOR = 64              # time signature denominators: 1, 2, 4, ... 64
+LONGEST_S = 24 * 3600.0           # no MIDI song is read past a day, whatever limit the caller sets
 
 
 @dataclass(eq=False)
@@ -187,8 +192,10 @@ class MidiSong:
         return np.unique(np.concatenate(out))
 
 
-def read_midi(path) -> MidiSong:
-    """Parse a MIDI file into parts; ``InputError`` when it cannot be read or has no notes."""
+def read_midi(path, max_duration_s: float | None = None) -> MidiSong:
+    """Parse a MIDI file into parts; ``InputError`` when it cannot be read, has no notes, states a
+    tempo or time signature outside ``TEMPO_RANGE_BPM`` / ``MAX_DENOMINATOR``, or lasts longer than
+    ``max_duration_s`` (and ``LONGEST_S`` in any case), all checked before anything is sized by them."""
     import mido
 
     path = Path(path)
@@ -204,15 +211,29 @@ def read_midi(path) -> MidiSong:
     tpb = int(mid.ticks_per_beat)
     if tpb <= 0:
         raise InputError(f"{path}: the file uses SMPTE timing, not ticks per beat; save it with musical timing")
+    limit = LONGEST_S if max_duration_s is None else min(float(max_duration_s), LONGEST_S)
+    # Ticks past what the slowest allowed tempo plays within the limit are a corrupt or hostile file.
+    max_tick = limit * TEMPO_RANGE_BPM[1] / 60.0 * tpb
     tempos, sigs, parts, end_tick = {0: 500000}, {0: (4, 4)}, [], 0
     for t, track in enumerate(mid.tracks):
         tick, name, pending, notes = 0, "", {}, {}
         for msg in track:
             tick += msg.time
+            if tick > max_tick:
+                raise InputError(f"{path}: an event at tick {tick} lies beyond {limit / 60:.0f} minutes at any "
+                                 f"tempo the file may state: the file is corrupt or too long")
             if msg.type == "set_tempo":
+                bpm = 60e6 / msg.tempo if msg.tempo > 0 else float("inf")
+                if not TEMPO_RANGE_BPM[0] <= bpm <= TEMPO_RANGE_BPM[1]:
+                    raise InputError(f"{path}: a tempo of {bpm:.4g} bpm at tick {tick} is outside "
+                                     f"{TEMPO_RANGE_BPM[0]:g}-{TEMPO_RANGE_BPM[1]:g} bpm; fix the tempo map")
                 tempos[tick] = msg.tempo
             elif msg.type == "time_signature":
-                sigs[tick] = (msg.numerator, msg.denominator)
+                num, den = msg.numerator, msg.denominator
+                if num < 1 or not 1 <= den <= MAX_DENOMINATOR or den & (den - 1):
+                    raise InputError(f"{path}: the time signature {num}/{den} at tick {tick} is not one music "
+                                     f"uses (a denominator of 1, 2, 4, ... {MAX_DENOMINATOR}); fix it")
+                sigs[tick] = (num, den)
             elif msg.type == "track_name":
                 name = msg.name.strip()
             elif msg.type == "note_on" and msg.velocity > 0:
@@ -233,8 +254,13 @@ def read_midi(path) -> MidiSong:
         raise InputError(f"{path}: the MIDI file has no notes; give a file with a melody track")
     tt = np.array(sorted(tempos), dtype=np.int64)
     st = np.array(sorted(sigs), dtype=np.int64)
-    return MidiSong(tuple(parts), tpb, tt, np.array([tempos[k] for k in tt], dtype=np.float64), st,
+    song = MidiSong(tuple(parts), tpb, tt, np.array([tempos[k] for k in tt], dtype=np.float64), st,
                     tuple(sigs[k] for k in st), int(max(end_tick, max(int(p.off.max()) for p in parts))), str(path))
+    duration_s = float(song.seconds(song.end_tick))
+    if duration_s > limit:
+        raise InputError(f"{path}: the song is {duration_s / 60:.1f} min long, over the limit of "
+                         f"{limit / 60:.1f} min; cut it or raise the limit")
+    return song
 
 
 def choose_parts(song: MidiSong, melody: int | None = None, rhythm: int | None = None) -> tuple[MidiPart, MidiPart | None]:
@@ -280,7 +306,7 @@ def _skyline(part: MidiPart) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
 def midi_notes(path, *, melody_track: int | None = None, rhythm_track: int | None = None,
                max_duration_s: float | None = None) -> NoteSequence:
     """The melody of a MIDI file as a ``NoteSequence`` (see the module docstring for the choices)."""
-    song = read_midi(path)
+    song = read_midi(path, max_duration_s)
     mel, rhy = choose_parts(song, melody_track, rhythm_track)
     on, off, pitch, vel = _skyline(mel)
     if len(on) < MIN_MELODY_NOTES:
@@ -296,10 +322,7 @@ def midi_notes(path, *, melody_track: int | None = None, rhythm_track: int | Non
     # A sixteenth's length averaged over each note's time, so durations count ticks exactly across tempo changes.
     nxt = np.append(on[1:], off[-1])
     sixteenth_s = (song.seconds(nxt) - onset_s) / ((nxt - on) / (song.ticks_per_beat / 4.0))
-    duration_s = float(song.seconds(song.end_tick))
-    if max_duration_s is not None and duration_s > max_duration_s:
-        raise InputError(f"{song.source}: the song is {duration_s / 60:.1f} min long, over the limit of "
-                         f"{max_duration_s / 60:.1f} min; cut it or raise the limit")
+    duration_s = float(song.seconds(song.end_tick))  # within the limit: read_midi checked it
     beat_s = song.seconds(beats)
     tempo = 60.0 / float(np.median(np.diff(beat_s))) if len(beat_s) > 1 else 60e6 / song.tempo_us[0]
     meta = {"melody_part": mel.index, "rhythm_part": None if rhy is None else rhy.index,
