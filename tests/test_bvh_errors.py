@@ -63,7 +63,13 @@ def test_error_missing_file(tmp_path):
     (TWO_JOINTS.replace("Frames: 2", "Frames: 0"), "line 17: 'Frames: 0'"),
     (TWO_JOINTS.replace("Frames: 2", "Frames: -4"), "line 17: 'Frames: -4'"),
     (TWO_JOINTS.replace("Frames: 2", "Frames: two"), "line 17: 'Frames:' needs a whole number"),
-    (TWO_JOINTS.replace("Frame Time: 0.04", "Frame Time: 0"), "line 18: Frame Time 0 must be a positive"),
+    (TWO_JOINTS.replace("Frame Time: 0.04", "Frame Time: 0"), "line 18: Frame Time 0 must be a number of seconds"),
+    # Issue 13: 10^300 fps once read, then was written back in a form the reader refused.
+    (TWO_JOINTS.replace("Frame Time: 0.04", "Frame Time: 1e-300"), "line 18: Frame Time 1e-300 .*[(]1-1000 fps"),
+    (TWO_JOINTS.replace("Frame Time: 0.04", "Frame Time: 5"), "line 18: Frame Time 5 .*[(]1-1000 fps"),
+    # ... and a root offset of 1e308 made every position infinite.
+    (TWO_JOINTS.replace("OFFSET 1.0 2.0 3.0", "OFFSET 1e308 2.0 3.0"), "line 4: OFFSET x is 1e308; .* within"),
+    (TWO_JOINTS.replace("-40 -50", "-40 1e300"), "line 20: value 1e.300 .* beyond"),
     (TWO_JOINTS.replace("Frame Time: 0.04", "Frame Time: -0.04"), "line 18: Frame Time -0.04 must be"),
     (TWO_JOINTS.replace("Frame Time: 0.04\n", ""), "line 18: expected 'Frame Time: seconds'"),
     (TWO_JOINTS.replace("Frames: 2\n", ""), "line 17: expected 'Frames: N'"),

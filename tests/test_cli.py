@@ -186,3 +186,21 @@ def test_build_db_writes_a_database_that_dance_can_use(tmp_path, out):
     proc = run("dance", TRUMPET, "-o", out, "--database", db, "--style", "perfume_mit")
     assert proc.returncode == 0, proc.stderr
     assert "perfume_mit" in proc.stdout and out.exists()
+
+
+@pytest.mark.parametrize("args, words", [
+    (("--seed", "-1"), ("seed -1", "whole number")),             # issue 13: was exit 70, "internal error"
+    (("--max-minutes", "nan"), ("length limit", "nan")),  # issue 13: switched the limit off
+])
+def test_nonsense_options_are_refused(out, args, words):
+    assert_clean_failure(run("dance", TRUMPET, "-o", out, *args), out, *words)
+
+
+def test_dance_config_refuses_seeds_numpy_cannot_take():
+    from dancesynth.api import DanceConfig
+    from dancesynth.errors import InputError
+
+    for seed in (-1, 2**63, 1.5, True):
+        with pytest.raises(InputError, match="seed"):
+            DanceConfig(seed=seed)
+    assert DanceConfig(seed=2**63 - 1).seed == 2**63 - 1

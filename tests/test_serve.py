@@ -146,6 +146,8 @@ def test_an_oversized_upload_is_refused_with_413(server):
     ({"song": "no_such_song.ogg"}, None, ["no bundled song"]),
     ({}, None, ["audio file"]),
     ({"song": TRUMPET.name, "seed": "abc"}, None, ["seed"]),
+    ({"song": TRUMPET.name, "seed": "--5"}, None, ["seed"]),  # issue 13: was HTTP 500
+    ({"song": TRUMPET.name, "seed": "-1"}, None, ["seed"]),
     ({"song": TRUMPET.name, "style": "polka-on-ice"}, None, ["style"]),
 ])
 def test_bad_requests_get_400_with_a_message_and_no_traceback(server, fields, files, words):

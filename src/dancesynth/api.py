@@ -15,7 +15,7 @@ from .engines.graph.engine import EngineConfig, GraphEngine, MusicSegment, Segme
 from .engines.graph.meta_graph import GraphConfig
 from .errors import InputError
 from .motion.database import MotionDatabase, open_database
-from .types import MotionClip, MusicFeatures
+from .types import MotionClip, MusicFeatures, check_seed
 
 ENGINES = ("streaming", "global", "neural", "choreography")
 FALLBACK_BPM = 100.0  # the tempo we dance at when the music has no clear beat
@@ -64,6 +64,9 @@ class DanceConfig:
                              "whole song already)")
         if not 1 <= self.fps <= 240:
             raise InputError(f"frame rate {self.fps} is out of range: use 1 to 240 fps")
+        check_seed(self.seed)
+        if not self.max_duration_s > 0:  # NaN too: it would switch the limit off
+            raise InputError(f"the song length limit must be a positive number of seconds, got {self.max_duration_s}")
 
 
 Progress = Callable[[str, int, int], None]

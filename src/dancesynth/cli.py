@@ -47,7 +47,8 @@ def cli():
               help="Streaming: choose each segment seeing this much of the music after it; the dance follows the "
                    "music's loudness more closely, its feet slide a little more (docs/accents.md).")
 @click.option("--fps", type=float, default=30.0, show_default=True, help="Frame rate of the output.")
-@click.option("--seed", type=int, default=None, help="Vary the dance between runs (default: deterministic).")
+@click.option("--seed", type=int, default=None,
+              help="Vary the dance between runs (default: deterministic).")
 @click.option("--database", type=click.Path(file_okay=False, path_type=Path),
               help="A database folder or a folder of BVH files (default: the bundled database).")
 @click.option("--max-minutes", type=float, default=15.0, show_default=True, help="Refuse longer songs.")
@@ -320,7 +321,7 @@ def bench(quick, out_dir):
 @click.option("--minutes", type=float, default=None, help="Time budget (default: the config's).")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path),
               help="Folder (or .pt file) for the weights (default: the user cache, used by 'dance --engine neural').")
-@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
 @click.option("--database", type=click.Path(file_okay=False, path_type=Path),
               help="A database folder or a folder of BVH files (default: the bundled database).")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")

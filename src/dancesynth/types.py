@@ -13,7 +13,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .errors import InputError
+
 ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
+MAX_SEED = 2**63 - 1
+
+
+def check_seed(seed) -> None:
+    """A dance's seed is None or a whole number 0 .. 2^63 - 1 (numpy's generators take no negatives)."""
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))
+                             or not 0 <= int(seed) <= MAX_SEED):
+        raise InputError(f"seed {seed!r} must be a whole number from 0 to {MAX_SEED} (or left out)")
+
 POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
 
 

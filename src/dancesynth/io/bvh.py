@@ -45,6 +45,10 @@ __all__ = ["UNITS", "read_bvh", "parse_bvh", "write_bvh", "format_bvh", "detect_
            "is_tpose_first_frame"]
 
 _CHANNEL_NAMES = {c.lower(): c for c in POSITION_CHANNELS + ROTATION_CHANNELS}
+# What a motion file may state (checked as it is read): frame rates and coordinates past these are
+# corrupt or hostile files (10^300 fps, an offset of 1e308 that makes every position infinite).
+FPS_RANGE = (1.0, 1000.0)
+MAX_VALUE = 1e6  # any OFFSET or channel value, in the file's units (cm or m; degrees)
 _KEYWORDS = {"HIERARCHY", "ROOT", "JOINT", "END", "OFFSET", "CHANNELS", "MOTION", "{", "}"}
 _TOKEN = re.compile(r"[{}]|[^\s{}]+")
 _MOTION_LINE = re.compile(r"^[ \t]*MOTION[ \t]*$", re.MULTILINE)
@@ -157,8 +161,8 @@ def _parse_hierarchy(header: str, name: str, raw: _Raw) -> None:
             v = float(tok)
         except ValueError:
             raise err(f"expected a number for {what}, found {tok!r}; fix the OFFSET line", line) from None
-        if not math.isfinite(v):
-            raise err(f"{what} is {tok}; OFFSET values must be finite numbers", line)
+        if not (math.isfinite(v) and abs(v) <= MAX_VALUE):
+            raise err(f"{what} is {tok}; OFFSET values must be finite numbers within ±{MAX_VALUE:g}", line)
         return v
 
     tok, line = take("HIERARCHY")
@@ -316,9 +320,10 @@ def _parse_motion(body: str, motion_lineno: int, name: str, raw: _Raw) -> None:
         frame_time = float(m.group(1))
     except ValueError:
         raise InputError(f"{name}: line {lineno}: Frame Time {m.group(1)[:40]!r} is not a number") from None
-    if not (math.isfinite(frame_time) and frame_time > 0):
-        raise InputError(f"{name}: line {lineno}: Frame Time {m.group(1)} must be a positive number of seconds "
-                         "(e.g. 0.0083333 for 120 fps)")
+    if not (math.isfinite(frame_time) and 1.0 / FPS_RANGE[1] <= frame_time <= 1.0 / FPS_RANGE[0]):
+        raise InputError(f"{name}: line {lineno}: Frame Time {m.group(1)[:40]} must be a number of seconds from "
+                         f"{1.0 / FPS_RANGE[1]:g} to {1.0 / FPS_RANGE[0]:g} ({FPS_RANGE[0]:g}-{FPS_RANGE[1]:g} fps; "
+                         "e.g. 0.0083333 for 120 fps)")
     raw.frame_time = frame_time
     raw.frame_time_text = m.group(1)
 
@@ -336,12 +341,12 @@ def _parse_motion(body: str, motion_lineno: int, name: str, raw: _Raw) -> None:
     if values is None or values.shape != (n_frames, n_ch):
         _diagnose_motion(lines[i:], data_first_line, n_frames, n_ch, name)
         raise InputError(f"{name}: the MOTION block cannot be read as {n_frames} lines of {n_ch} numbers")
-    finite = np.isfinite(values)
+    finite = np.isfinite(values) & (np.abs(values) <= MAX_VALUE)
     if not finite.all():
         f, c = np.argwhere(~finite)[0]
         line_of = _nonblank_line_numbers(lines[i:], data_first_line)
-        raise InputError(f"{name}: line {line_of[f]}: value {values[f, c]} (frame {f}, channel {c + 1}) is not "
-                         "finite; fix or re-export the motion")
+        raise InputError(f"{name}: line {line_of[f]}: value {values[f, c]} (frame {f}, channel {c + 1}) is "
+                         f"not finite or lies beyond ±{MAX_VALUE:g}; fix or re-export the motion")
     raw.values = values
 
 

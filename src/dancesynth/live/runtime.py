@@ -28,7 +28,7 @@ from ..engines.graph.engine import EngineConfig, GraphEngine, MusicSegment
 from ..errors import InputError
 from ..motion.database import open_database
 from ..motion.motifs import chi2
-from ..types import MotionClip
+from ..types import MotionClip, check_seed
 from .beats import StreamingBeatTracker
 from .sources import AudioSource, wait_for_audio
 
@@ -44,6 +44,9 @@ class LiveConfig:
     first_audio_timeout_s: float = 20.0
     render: EngineConfig = field(default_factory=EngineConfig)
     follow_signature: bool = False     # keep the genre's motif signature (engines/graph/signature.py)
+
+    def __post_init__(self):
+        check_seed(self.seed)
 
 
 @dataclass(frozen=True)

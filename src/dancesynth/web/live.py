@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import DanceSynthError
 from ..live.beats import LATENCY_S
+from ..types import MAX_SEED
 from ..live.sources import SR
 
 # Motion for stream time t is ready one segment plus the beat tracker's latency after t
@@ -273,7 +274,10 @@ async def watch(ws, hub: LiveHub) -> None:
     url = q.get("url", "").strip()
     try:
         segment_s = float(q.get("segment_s") or 5.0)
-        seed = int(q["seed"]) if q.get("seed") else None
+        seed_text = q.get("seed") or ""
+        if seed_text and not (seed_text.isdigit() and int(seed_text) <= MAX_SEED):  # "-1", "--5": no
+            raise ValueError(seed_text)
+        seed = int(seed_text) if seed_text else None
     except ValueError:
         segment_s = seed = None
     if not url.startswith(("http://", "https://")):

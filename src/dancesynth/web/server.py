@@ -38,6 +38,7 @@ from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket
 
 from ..errors import DanceSynthError, InputError
+from ..types import MAX_SEED
 from .live import LiveHub, watch
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
@@ -47,7 +48,6 @@ _MEDIA_TYPES = {".ogg": "audio/ogg", ".oga": "audio/ogg", ".opus": "audio/ogg", 
                 ".flac": "audio/flac", ".mp3": "audio/mpeg", ".m4a": "audio/mp4", ".aac": "audio/aac",
                 ".webm": "audio/webm"}
 _UPLOAD_ID = re.compile(r"^[0-9a-f]{32}(\.[a-z0-9]{1,5})?$")
-MAX_SEED = 2**31 - 1
 
 
 def bundled_songs() -> list[dict]:
@@ -193,8 +193,8 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
         try:
             style = _text(form, "style") or None
             seed_text = _text(form, "seed")
-            if seed_text and not (seed_text.lstrip("-").isdigit() and abs(int(seed_text)) <= MAX_SEED):
-                return _error(400, f"seed {seed_text!r} must be a whole number (e.g. 7) or empty")
+            if seed_text and not (seed_text.isdigit() and int(seed_text) <= MAX_SEED):  # "-1", "--5": no
+                return _error(400, f"seed {seed_text!r} must be a whole number from 0 to {MAX_SEED} (e.g. 7) or empty")
             seed = int(seed_text) if seed_text else None
             audio = form.get("audio")
             song_name = _text(form, "song")
