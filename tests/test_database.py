@@ -49,6 +49,23 @@ def test_a_manifest_assigns_genres(tmp_path):
     (folder / "genres.toml").write_text("this is not toml = [")
     with pytest.raises(InputError, match="genres manifest"):
         collect_sources(folder)
+    # Issue 13: valid TOML of the wrong shape was an internal error (TypeError, AttributeError).
+    for wrong in ("genres = 3", "[genres]\nsalsa = 5", '[genres]\nsalsa = [5, "cmu_daz_salsa/*.bvh"]'):
+        (folder / "genres.toml").write_text(wrong + "\n")
+        with pytest.raises(InputError, match="must be a table of genre"):
+            collect_sources(folder)
+
+
+def test_a_one_frame_clip_in_a_database_folder_is_left_out(tmp_path):
+    """Issue 13: a clip too short to hold a beat was an internal error (numpy's gradient of one frame)."""
+    folder = tmp_path / "db"
+    shutil.copytree(FIXTURES / "cmu_daz_salsa", folder / "salsa")
+    head, motion = next((folder / "salsa").glob("*.bvh")).read_text().split("MOTION", 1)
+    frame_time, first = motion.strip().splitlines()[1:3]
+    (folder / "salsa" / "one_frame.bvh").write_text(f"{head}MOTION\nFrames: 1\n{frame_time}\n{first}\n")
+    db = build_database(collect_sources(folder))
+    assert "one_frame" not in {name for st in db.styles.values() for name in st.clip_names}
+    assert sum(st.n_clips for st in db.styles.values()) == len(list(FIXTURES.glob("cmu_daz_salsa/*.bvh")))
 
 
 def test_save_and_load_keep_the_motion(small_db, tmp_path):

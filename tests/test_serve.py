@@ -311,3 +311,13 @@ def test_the_page_dances_live_to_a_stream_in_headless_chromium(server, music_htt
     # The delay the server asks for is enough: the motion of every moment heard had arrived.
     assert live["delay_s"] == pytest.approx(2 + 1.5 + 1.0)
     assert live["playing_s"] > 0.5 and live["starved_s"] < 0.1, live
+
+
+def test_bundled_songs_are_regular_files_only(tmp_path, monkeypatch):
+    """Issue 13: a symlink placed in the bundled music folder was listed and served, wherever it led."""
+    from dancesynth.web import server as web
+
+    shutil.copy(TRUMPET, tmp_path / TRUMPET.name)
+    (tmp_path / "secret.ogg").symlink_to("/etc/passwd")
+    monkeypatch.setattr(web, "MUSIC_DIR", tmp_path)
+    assert [s["name"] for s in web.bundled_songs()] == [TRUMPET.name]

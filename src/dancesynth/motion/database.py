@@ -38,6 +38,7 @@ from .roles import bone_masses, find_roles
 FORMAT_VERSION = 1
 BUNDLED_DATABASE = Path(__file__).resolve().parents[1] / "data" / "database"
 MANIFEST_NAME = "genres.toml"
+MIN_CLIP_S = 0.5  # a clip shorter than this has no 3 beats to find (and may have too few frames to differentiate)
 
 
 @dataclass(frozen=True)
@@ -197,6 +198,11 @@ def collect_sources(folder: Path, manifest: Path | None = None) -> list[tuple[st
         except (OSError, tomllib.TOMLDecodeError, KeyError, UnicodeDecodeError) as exc:
             raise InputError(f"{manifest}: not a valid genres manifest ({exc}); "
                              "it needs a [genres] table of genre = [glob patterns]") from None
+        if not isinstance(genres, dict) or not all(
+                isinstance(p, str) or (isinstance(p, list) and all(isinstance(x, str) for x in p))
+                for p in genres.values()):
+            raise InputError(f"{manifest}: 'genres' must be a table of genre = \"pattern\" or [\"pattern\", ...] "
+                             f"(glob patterns as strings), e.g. salsa = [\"cmu_daz_salsa/*.bvh\"]")
         out = []
         for genre, patterns in genres.items():
             for pat in [patterns] if isinstance(patterns, str) else patterns:
@@ -239,6 +245,8 @@ def build_database(sources: Iterable[tuple[str, Path]], config: AnalysisConfig =
         fps = min(m[2] for m in members)
         analysed = []
         for path, clip, _ in members:
+            if clip.duration_s < MIN_CLIP_S:  # too short for a beat: nothing to analyse or dance
+                continue
             rot_, pos_, _ = resample_clip_arrays(clip.local_rot, clip.root_pos, None, clip.fps, fps)
             pos_ = pos_ * (_leg_length(canon) / _leg_length(clip.skeleton))
             c = MotionClip(canon, fps, pos_, rot_, meta={"name": path.stem, "source": str(path)})

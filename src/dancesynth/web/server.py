@@ -51,10 +51,12 @@ _UPLOAD_ID = re.compile(r"^[0-9a-f]{32}(\.[a-z0-9]{1,5})?$")
 
 
 def bundled_songs() -> list[dict]:
-    """The songs shipped with the package: file name, a readable title, the licence note if any."""
+    """The songs shipped with the package: file name, a readable title, the licence note if any.
+
+    Only regular files inside the folder: a symlink placed there could point anywhere."""
     songs = []
     for path in sorted(MUSIC_DIR.iterdir()) if MUSIC_DIR.is_dir() else []:
-        if path.is_file() and path.suffix.lower() in AUDIO_SUFFIXES:
+        if not path.is_symlink() and path.is_file() and path.suffix.lower() in AUDIO_SUFFIXES:
             songs.append({"name": path.name, "title": path.stem.replace("_", " "),
                           "url": f"/api/songs/{path.name}"})
     return songs
