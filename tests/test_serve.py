@@ -321,3 +321,44 @@ def test_bundled_songs_are_regular_files_only(tmp_path, monkeypatch):
     (tmp_path / "secret.ogg").symlink_to("/etc/passwd")
     monkeypatch.setattr(web, "MUSIC_DIR", tmp_path)
     assert [s["name"] for s in web.bundled_songs()] == [TRUMPET.name]
+
+
+def test_concurrent_uploads_are_danced_or_told_to_wait_and_the_folder_stays_bounded():
+    """Issue 13: of 30 concurrent uploads 11 got 400 'file not found' and 11 of the 19 dances came back
+    with an audio_url already deleted, while the folder grew to 60 files against a bound of 8: uploads
+    waiting for a dance slot were pruned. Now each is danced (its audio still there) or refused with
+    503 before it is stored, and the folder never holds more than its bound."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from dancesynth.web.server import create_app
+
+    app = create_app(max_upload_mb=MAX_UPLOAD_MB, max_concurrent_dances=2, max_stored_uploads=4)
+    song = TRUMPET.read_bytes()
+    with uvicorn_server(app) as address:
+        store_dir = app.state.uploads.dir
+        peak, stop = [0], threading.Event()
+
+        def watch_folder():
+            while not stop.is_set():
+                peak[0] = max(peak[0], len(list(store_dir.iterdir())))
+                time.sleep(0.01)
+
+        def one(i):
+            status, result = post_dance(address, {"style": "salsa"}, {"audio": (f"song{i}.ogg", song)})
+            if status == 200:  # the page then fetches the audio to play along
+                got, _, audio = request(address, "GET", result["audio_url"])
+                return status, got == 200 and audio == song
+            return status, result.get("error", "")
+
+        watcher = threading.Thread(target=watch_folder, daemon=True)
+        watcher.start()
+        with ThreadPoolExecutor(12) as pool:
+            outcomes = list(pool.map(one, range(12)))
+        stop.set()
+        watcher.join(5)
+    danced = [ok for status, ok in outcomes if status == 200]
+    busy = [msg for status, msg in outcomes if status == 503]
+    assert len(danced) + len(busy) == 12, outcomes
+    assert len(danced) >= 4 and all(danced), outcomes
+    assert all("busy" in msg for msg in busy)
+    assert peak[0] <= 4

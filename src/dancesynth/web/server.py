@@ -65,24 +65,39 @@ def bundled_songs() -> list[dict]:
 class UploadStore:
     """A bounded folder of uploaded songs, kept so the page can play them.
 
-    At most ``max_files`` files and ``max_age_s`` seconds each; the oldest go first.
+    At most ``max_files`` files at any time. An upload is *pending* from ``new_path`` until
+    ``done`` (its dance is finished) and is never removed meanwhile: a song waiting for a dance
+    slot must still be there when its turn comes. A finished upload may go, oldest first, once
+    it has been served (the page fetched it to play along) or ``grace_s`` after its dance was
+    done, and in any case ``max_age_s`` after. When every place is taken by uploads that may
+    not go yet, ``new_path`` returns None: the server is busy, and says so, rather than
+    delete a song someone is waiting for or let the folder grow.
     """
 
-    def __init__(self, *, max_files: int = 8, max_age_s: float = 3600.0):
+    def __init__(self, *, max_files: int = 8, max_age_s: float = 3600.0, grace_s: float = 60.0):
         self.dir = Path(tempfile.mkdtemp(prefix="dancesynth-uploads-"))
         self.max_files = max_files
         self.max_age_s = max_age_s
+        self.grace_s = grace_s
         self._lock = threading.Lock()
-        self._files: dict[str, float] = {}  # upload id -> time stored
+        self._files: dict[str, dict] = {}  # upload id -> {"t": stored, "done": time or None, "served": bool}
 
-    def new_path(self, filename: str | None) -> tuple[str, Path]:
+    def new_path(self, filename: str | None) -> tuple[str, Path] | None:
         suffix = Path(filename or "").suffix.lower()
         suffix = suffix if re.fullmatch(r"\.[a-z0-9]{1,5}", suffix) else ""
         key = uuid.uuid4().hex + suffix
         with self._lock:
             self._prune(keep=self.max_files - 1)
-            self._files[key] = time.time()
+            if len(self._files) >= self.max_files:
+                return None
+            self._files[key] = {"t": time.time(), "done": None, "served": False}
         return key, self.dir / key
+
+    def done(self, key: str) -> None:
+        """The upload's dance is finished: it may be served now, and go later."""
+        with self._lock:
+            if key in self._files:
+                self._files[key]["done"] = time.time()
 
     def discard(self, key: str) -> None:
         with self._lock:
@@ -93,16 +108,23 @@ class UploadStore:
         if not _UPLOAD_ID.match(key):
             return None
         with self._lock:
-            self._prune(keep=self.max_files)
-            if key not in self._files:
+            entry = self._files.get(key)
+            if entry is None or entry["done"] is None:
                 return None
+            entry["served"] = True
         p = self.dir / key
         return p if p.is_file() else None
 
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._files)
+
     def _prune(self, keep: int) -> None:
         now = time.time()
-        for key, t in sorted(self._files.items(), key=lambda kv: kv[1]):
-            if len(self._files) > keep or now - t > self.max_age_s:
+        for key, e in sorted(self._files.items(), key=lambda kv: kv[1]["t"]):
+            expired = now - e["t"] > self.max_age_s
+            finished = e["done"] is not None and (e["served"] or now - e["done"] > self.grace_s)
+            if expired or (len(self._files) > keep and finished):
                 self._files.pop(key)
                 (self.dir / key).unlink(missing_ok=True)
 
@@ -201,7 +223,11 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
             audio = form.get("audio")
             song_name = _text(form, "song")
             if isinstance(audio, UploadFile) and (audio.filename or audio.size):
-                upload_key, song_path = store.new_path(audio.filename)
+                stored = store.new_path(audio.filename)
+                if stored is None:
+                    return _error(503, f"the server is busy with {store.max_files} uploaded songs; try again in a "
+                                       "minute, or dance a bundled song")
+                upload_key, song_path = stored
                 shown = Path(audio.filename or "upload").name
                 await run_in_threadpool(_save_upload, audio, song_path)
                 audio_url = f"/api/uploads/{upload_key}"
@@ -219,8 +245,14 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
             # Name the song as the user knows it, not by where the server keeps it.
             message = str(exc).replace(str(song_path), shown) if song_path else str(exc)
             return _error(400 if isinstance(exc, InputError) else 500, message)
+        except BaseException:
+            if upload_key:  # an internal error or a dropped request: the song will never be danced
+                store.discard(upload_key)
+            raise
         finally:
             await form.close()
+        if upload_key:
+            store.done(upload_key)
         result["audio_url"] = audio_url
         return JSONResponse(result)
 
