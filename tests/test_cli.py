@@ -204,3 +204,22 @@ def test_dance_config_refuses_seeds_numpy_cannot_take():
         with pytest.raises(InputError, match="seed"):
             DanceConfig(seed=seed)
     assert DanceConfig(seed=2**63 - 1).seed == 2**63 - 1
+
+
+def test_a_report_that_cannot_be_written_leaves_no_dance_behind(tmp_path, out):
+    """Issue 13: the BVH was written, then the report failed. Both are written, or neither."""
+    proc = run("dance", TRUMPET, "-o", out, "--report", tmp_path / "no_such_folder" / "r.json")
+    assert_clean_failure(proc, out, "no_such_folder")
+
+
+def test_a_full_disk_is_a_one_line_error_naming_the_file(tmp_path):
+    """Issue 13: a write that fails half-way (a full disk: ENOSPC) leaves nothing and says why."""
+    from dancesynth.errors import InputError
+    from dancesynth.io.files import atomic_output
+
+    target = tmp_path / "dance.bvh"
+    with pytest.raises(InputError, match="cannot write .*dance.bvh: No space left on device"):
+        with atomic_output(target) as fh:
+            fh.write("x")
+            raise OSError(28, "No space left on device")
+    assert not target.exists() and not list(tmp_path.iterdir())

@@ -63,10 +63,12 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
           database, max_minutes, ths, thr, paper, report_path, quiet):
     """Make a beat-synchronised dance for SONG (wav, ogg, flac, mp3, ...) and write it as BVH."""
     from .api import DanceConfig, dance as make_dance
-    from .io.bvh import write_bvh
+    from .io.bvh import format_bvh, write_bvh
+    from .io.files import atomic_output
 
     output = output or Path(song.stem + ".bvh")
     bvh_output(output)
+    writable(output, report_path)
     config = DanceConfig(style=style, engine=engine, segment_s=segment_seconds, lookahead_s=lookahead, fps=fps,
                          seed=seed, max_duration_s=max_minutes * 60.0, motif_at=motif_at, recreate=recreate,
                          follow_signature=follow_signature)
@@ -88,11 +90,15 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
     finally:
         progress.close()
     t = time.perf_counter()
-    write_bvh(output, clip)
-    if report_path is not None:
+    if report_path is None:
+        write_bvh(output, clip)
+    else:  # both or neither: a report that cannot be written must not leave its dance behind
         from .eval.report import dance_report
 
-        write_json(report_path, dance_report(clip))
+        report = dance_report(clip)
+        with atomic_output(output, "w", encoding="utf-8", newline="\n") as fh:
+            fh.write(format_bvh(clip))
+            write_json(report_path, report)
     s = clip.meta["summary"]
     s["timings_s"]["write_s"] = time.perf_counter() - t
     for warning in s.get("warnings", ()):  # also with --quiet: the dance is not what the user may expect

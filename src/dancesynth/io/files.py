@@ -30,9 +30,11 @@ def atomic_path(path):
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if isinstance(exc, OSError) and exc.strerror:  # a full disk, a quota, a folder gone read-only
+            raise InputError(f"cannot write {path}: {exc.strerror}; nothing was written") from None
         raise
 
 
