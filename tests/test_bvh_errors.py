@@ -96,3 +96,24 @@ def test_gimbal_warning_not_leaked():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         format_bvh(clip)
+
+
+def _chain(n: int) -> str:
+    """A BVH of one chain of ``n`` joints, two frames."""
+    lines = ["HIERARCHY", "ROOT j0", "{", "OFFSET 0 0 0",
+             "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"]
+    for i in range(1, n):
+        lines += [f"JOINT j{i}", "{", "OFFSET 0 1 0", "CHANNELS 3 Zrotation Xrotation Yrotation"]
+    lines += ["End Site", "{", "OFFSET 0 1 0", "}"] + ["}"] * n
+    row = " ".join(["0"] * (6 + 3 * (n - 1)))
+    return "\n".join(lines + ["MOTION", "Frames: 2", "Frame Time: 0.033333", row, row]) + "\n"
+
+
+def test_deep_skeletons_up_to_the_limit_read_and_write_back_and_deeper_ones_are_refused():
+    """Issue 13: a 1,000-joint chain read but could not be written (recursion); 20,000 took 11 s."""
+    from dancesynth.io.bvh import MAX_JOINTS
+
+    clip = parse_bvh(_chain(MAX_JOINTS))
+    assert parse_bvh(format_bvh(clip)).skeleton.n_joints == MAX_JOINTS
+    with pytest.raises(InputError, match=f"more than {MAX_JOINTS} joints"):
+        parse_bvh(_chain(MAX_JOINTS + 1))

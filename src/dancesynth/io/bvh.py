@@ -49,6 +49,7 @@ _CHANNEL_NAMES = {c.lower(): c for c in POSITION_CHANNELS + ROTATION_CHANNELS}
 # corrupt or hostile files (10^300 fps, an offset of 1e308 that makes every position infinite).
 FPS_RANGE = (1.0, 1000.0)
 MAX_VALUE = 1e6  # any OFFSET or channel value, in the file's units (cm or m; degrees)
+MAX_JOINTS = 500  # a 20,000-joint chain took 11 s to read and a 1,000-joint one could not be written
 _KEYWORDS = {"HIERARCHY", "ROOT", "JOINT", "END", "OFFSET", "CHANNELS", "MOTION", "{", "}"}
 _TOKEN = re.compile(r"[{}]|[^\s{}]+")
 _MOTION_LINE = re.compile(r"^[ \t]*MOTION[ \t]*$", re.MULTILINE)
@@ -213,6 +214,9 @@ def _parse_hierarchy(header: str, name: str, raw: _Raw) -> None:
                               "joint names must be unique, rename one", line)
                 seen[tok] = line
                 idx = len(raw.names)
+                if idx >= MAX_JOINTS:
+                    raise err(f"more than {MAX_JOINTS} joints: no body needs so many (a hand has 20, a face rig "
+                              "a few dozen); the file is corrupt or not a character", line)
                 raw.names.append(tok)
                 raw.parents.append(stack[-1][0] if stack else -1)
                 raw.offsets.append((0.0, 0.0, 0.0))
