@@ -10,6 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from dancesynth.errors import InputError
 from dancesynth.eval.bench import SECTIONS, BenchConfig, format_bench, run_bench
 
 HUNGARIAN = "Hungarian_Dance_number_5_-_Allegro_in_F_sharp_minor_(string_orchestra).ogg"
@@ -190,7 +191,7 @@ def test_a_section_that_cannot_run_is_recorded_and_the_others_run(tmp_path):
 
 
 def test_unknown_section_is_refused(tmp_path):
-    with pytest.raises(ValueError, match="unknown bench section"):
+    with pytest.raises(InputError, match="unknown bench section"):
         run_bench(quick=True, out_dir=tmp_path, config=replace(BenchConfig.quick(), sections=("fig5",)))
 
 

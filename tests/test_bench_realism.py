@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import pytest
 
+from dancesynth.errors import InputError
 from dancesynth.eval.bench import TARGETS, targets
 from dancesynth.eval.bench_common import BenchConfig
 from dancesynth.eval.bench_realism import format_realism, realism_section
@@ -64,5 +65,5 @@ def test_format_and_target(section):
 
 
 def test_unknown_engines_are_refused(bundled_db):
-    with pytest.raises(ValueError, match="mocap engines only"):
+    with pytest.raises(InputError, match="mocap engines only"):
         realism_section(replace(tiny_config(), realism_engines=("streaming", "neural")), bundled_db)

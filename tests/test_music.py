@@ -328,9 +328,9 @@ def test_dp_beat_track_degenerate_input():
     for env in (np.zeros(500), np.zeros(0), np.ones(1)):
         frames, bpm = dp_beat_track(env, 50.0)
         assert frames.size == 0 and bpm == 0.0
-    with pytest.raises(ValueError):
+    with pytest.raises(InputError):
         dp_beat_track(np.ones((2, 100)), 50.0)
-    with pytest.raises(ValueError):
+    with pytest.raises(InputError):
         dp_beat_track(np.ones(100), 0.0)
 
 

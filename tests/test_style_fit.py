@@ -17,6 +17,8 @@ import sys
 import numpy as np
 import pytest
 
+from dancesynth.errors import InputError
+
 from conftest import BUNDLED_MUSIC, REPO
 from signals import SR, click_track, write
 
@@ -101,9 +103,9 @@ def test_sections_change_the_level_at_a_music_beat():
     np.testing.assert_allclose(d[(grid.times_s[:-1] >= b33 - 1e-9) & (grid.times_s[:-1] < b49 - 1e-9)], 0.5)
     np.testing.assert_allclose(d[grid.times_s[:-1] >= b49 - 1e-9], 1.0)
     assert np.all(np.isin(music.beat_times_s[:50], grid.times_s[grid.is_music_beat]))
-    with pytest.raises(ValueError):
+    with pytest.raises(InputError):
         beat_grid(music, subdivide=0.4)
-    with pytest.raises(ValueError):
+    with pytest.raises(InputError):
         beat_grid(music, subdivide=((3, 1),))
 
 

@@ -36,6 +36,7 @@ whole frames.
 from __future__ import annotations
 
 import numpy as np
+from .errors import InputError
 
 # librosa's defaults: an 8 s autocorrelation window, tempi up to 320 bpm.
 AC_WINDOW_S = 8.0
@@ -201,9 +202,9 @@ def dp_beat_track(onset_env: np.ndarray, fps: float, *, start_bpm: float = 120.0
     """
     env = np.asarray(onset_env, dtype=np.float64)
     if env.ndim != 1:
-        raise ValueError(f"onset_env must be one-dimensional, got shape {env.shape}")
+        raise InputError(f"onset_env must be one-dimensional, got shape {env.shape}")
     if not (fps > 0 and tightness > 0 and start_bpm > 0 and std_bpm > 0):
-        raise ValueError("fps, tightness, start_bpm and std_bpm must be positive")
+        raise InputError("fps, tightness, start_bpm and std_bpm must be positive")
     if bpm is None:
         bpm = estimate_tempo(env, fps, start_bpm=start_bpm, std_bpm=std_bpm)
     if not (bpm > 0) or env.size < 2 or not np.any(env > 0):
@@ -235,7 +236,7 @@ def dp_beat_track_varying(onset_env: np.ndarray, fps: float, *, tightness: float
     """
     env = np.asarray(onset_env, dtype=np.float64)
     if env.ndim != 1:
-        raise ValueError(f"onset_env must be one-dimensional, got shape {env.shape}")
+        raise InputError(f"onset_env must be one-dimensional, got shape {env.shape}")
     if env.size < 2 or not np.any(env > 0):
         return np.zeros(0, dtype=np.int64), np.zeros(env.size)
     bpm = tempo_curve(env, fps, **tempo_options)

@@ -80,7 +80,7 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
     if ths is not None or thr is not None:
         try:
             graph = replace(config.graph, **{k: v for k, v in (("ths", ths), ("thr", thr)) if v is not None})
-        except ValueError as exc:
+        except InputError as exc:
             raise InputError(f"{exc}: check --ths and --thr") from None
         config = replace(config, graph=graph)
     progress = Progress(enabled=not quiet and sys.stderr.isatty())

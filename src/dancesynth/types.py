@@ -51,9 +51,9 @@ class Skeleton:
         object.__setattr__(self, "offsets", offsets)
         n = len(self.names)
         if parents.shape != (n,) or offsets.shape != (n, 3) or len(self.channels) != n:
-            raise ValueError("Skeleton arrays disagree on the number of joints")
+            raise InputError("Skeleton arrays disagree on the number of joints")
         if n == 0 or parents[0] != -1 or np.any(parents[1:] < 0) or np.any(parents[1:] >= np.arange(1, n)):
-            raise ValueError("Skeleton parents must be topologically ordered with the root first")
+            raise InputError("Skeleton parents must be topologically ordered with the root first")
 
     @property
     def n_joints(self) -> int:
@@ -99,15 +99,15 @@ class MotionClip:
         self.local_rot = np.asarray(self.local_rot, dtype=np.float64)
         f, j = self.local_rot.shape[:2]
         if self.local_rot.shape != (f, j, 4) or j != self.skeleton.n_joints:
-            raise ValueError(f"local_rot must be (frames, {self.skeleton.n_joints}, 4), got {self.local_rot.shape}")
+            raise InputError(f"local_rot must be (frames, {self.skeleton.n_joints}, 4), got {self.local_rot.shape}")
         if self.root_pos.shape != (f, 3):
-            raise ValueError(f"root_pos must be ({f}, 3), got {self.root_pos.shape}")
+            raise InputError(f"root_pos must be ({f}, 3), got {self.root_pos.shape}")
         if self.local_pos is not None and np.shape(self.local_pos) != (f, j, 3):
-            raise ValueError("local_pos must be (frames, joints, 3)")
+            raise InputError("local_pos must be (frames, joints, 3)")
         if self.contacts is not None and np.shape(self.contacts) != (f, 2):
-            raise ValueError("contacts must be (frames, 2)")
+            raise InputError("contacts must be (frames, 2)")
         if not self.fps > 0:
-            raise ValueError("fps must be positive")
+            raise InputError("fps must be positive")
 
     @property
     def n_frames(self) -> int:
@@ -157,14 +157,14 @@ class MusicFeatures:
         self.beat_times_s = np.asarray(self.beat_times_s, dtype=np.float64)
         self.intensity_db = np.asarray(self.intensity_db, dtype=np.float64)
         if self.beat_times_s.ndim != 1 or np.any(np.diff(self.beat_times_s) <= 0):
-            raise ValueError("beat_times_s must be strictly increasing")
+            raise InputError("beat_times_s must be strictly increasing")
         if self.intensity_db.shape != (max(len(self.beat_times_s) - 1, 0),):
-            raise ValueError("intensity_db needs one value per beat interval")
+            raise InputError("intensity_db needs one value per beat interval")
         if self.beat_in_bar is not None:
             self.beat_in_bar = np.asarray(self.beat_in_bar, dtype=np.int64)
             if (self.beats_per_bar is None or self.beat_in_bar.shape != self.beat_times_s.shape
                     or np.any(self.beat_in_bar < 0) or np.any(self.beat_in_bar >= self.beats_per_bar)):
-                raise ValueError("beat_in_bar needs one position in [0, beats_per_bar) per beat")
+                raise InputError("beat_in_bar needs one position in [0, beats_per_bar) per beat")
 
     @property
     def n_beats(self) -> int:

@@ -30,6 +30,7 @@ import numpy as np
 
 from ..motion.database import MotionDatabase, Style
 from ..types import MusicFeatures
+from ..errors import InputError
 
 RATE_RANGE = (0.8, 1.25)   # playback rates (captured seconds per music second) that still look natural
 TARGET_SHARE = 0.9         # below this expected share of pieces in RATE_RANGE, the summary warns
@@ -61,11 +62,11 @@ def _sections(subdivide, n_beats: int) -> list[tuple[int, float]]:
     plan = [(0, subdivide)] if np.isscalar(subdivide) else [(int(b), s) for b, s in subdivide]
     if not plan or plan[0][0] != 0 or any(b1 <= b0 for (b0, _), (b1, _) in zip(plan, plan[1:])) \
             or plan[-1][0] >= n_beats - 1:
-        raise ValueError(f"sections {subdivide!r} must start at music beat 0 and increase within the song")
+        raise InputError(f"sections {subdivide!r} must start at music beat 0 and increase within the song")
     for _, s in plan:
         ok = (s >= 1 and float(s).is_integer()) or (0 < s < 1 and abs(1.0 / s - round(1.0 / s)) < 1e-6)
         if not ok:
-            raise ValueError(f"subdivide {s!r} must be a whole number >= 1 or 1/n (0.5 is half time)")
+            raise InputError(f"subdivide {s!r} must be a whole number >= 1 or 1/n (0.5 is half time)")
     return plan
 
 
@@ -103,7 +104,7 @@ def beat_grid(music: MusicFeatures, *, subdivide=1) -> BeatGrid:
     beats = np.asarray(music.beat_times_s, dtype=np.float64)
     inten = np.asarray(music.intensity_db, dtype=np.float64)
     if beats.size < 2:
-        raise ValueError("beat_grid needs at least two beats")
+        raise InputError("beat_grid needs at least two beats")
     plan = _sections(subdivide, beats.size)
     # A merged level at either end takes margin beats beyond the song, so that whichever
     # music beats it keeps, a kept beat still lies at or before 0 s and at or after the end.
@@ -320,7 +321,7 @@ def style_fits(db: MotionDatabase, beat_intervals_s, name: str | None = None, *,
     ib = np.asarray(beat_intervals_s, dtype=np.float64)
     ib = ib[np.isfinite(ib) & (ib > 0)]
     if ib.size == 0:
-        raise ValueError("style_fits needs at least one beat interval")
+        raise InputError("style_fits needs at least one beat interval")
     candidates = db.styles_of(name) if name else list(db.styles.values())
     fits = []
     for st in candidates:

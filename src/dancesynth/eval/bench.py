@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from .bench_common import SECTIONS, BenchConfig, Progress, skipped
+from ..errors import InputError
 
 __all__ = ["BenchConfig", "SECTIONS", "run_bench", "format_bench"]
 
@@ -81,7 +82,7 @@ def run_bench(*, quick: bool, out_dir: Path, progress: Progress | None = None,
     cfg = config or (BenchConfig.quick() if quick else BenchConfig.full())
     unknown = set(cfg.sections) - set(SECTIONS)
     if unknown:
-        raise ValueError(f"unknown bench section(s) {sorted(unknown)}: use {', '.join(SECTIONS)}")
+        raise InputError(f"unknown bench section(s) {sorted(unknown)}: use {', '.join(SECTIONS)}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     result = {"format": BENCH_FORMAT, "mode": "quick" if quick else "full", "dancesynth": __version__,

@@ -30,6 +30,7 @@ import numpy as np
 
 from .bench_common import MUSIC_DIR, BenchConfig, Progress, largest_style, load_song, table
 from ..types import MotionClip
+from ..errors import InputError
 
 ENGINES = ("streaming", "signature", "global", "choreography", "random_walk")
 TITLES = {"mocap": "remaining mocap (floor)", "frozen": "frozen pose", "streaming": "streaming (Xu)",
@@ -54,7 +55,7 @@ def _songs(cfg: BenchConfig) -> list[tuple[str, object]]:
     songs = [(Path(name).name, load_song(name, cfg.realism_max_s)) for name in names]
     songs = [(name, music) for name, music in songs if music.duration_s >= cfg.realism_min_s]
     if not songs:
-        raise ValueError(f"no song of the realism section lasts {cfg.realism_min_s:g} s or more: "
+        raise InputError(f"no song of the realism section lasts {cfg.realism_min_s:g} s or more: "
                          "configure longer songs (realism_songs) or a lower realism_min_s")
     return songs
 
@@ -67,9 +68,9 @@ def realism_section(cfg: BenchConfig, db, progress: Progress | None = None) -> d
 
     unknown = set(cfg.realism_engines) - set(ENGINES)
     if unknown:
-        raise ValueError(f"realism_engines {sorted(unknown)}: use mocap engines only ({', '.join(ENGINES)})")
+        raise InputError(f"realism_engines {sorted(unknown)}: use mocap engines only ({', '.join(ENGINES)})")
     if cfg.realism_seeds < 1:
-        raise ValueError(f"realism_seeds = {cfg.realism_seeds}: score at least one held-out split")
+        raise InputError(f"realism_seeds = {cfg.realism_seeds}: score at least one held-out split")
     style = db.styles[cfg.realism_style] if cfg.realism_style else largest_style(db)
     songs = _songs(cfg)
     engines = tuple(e for e in ENGINES if e in cfg.realism_engines)

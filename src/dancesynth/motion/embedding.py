@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ModelError
+from ..errors import ModelError, InputError
 from .words import FEATURE_DIM, WORD_FRAMES
 
 MODELS_DIR = Path(__file__).resolve().parents[1] / "data" / "models"
@@ -65,7 +65,7 @@ class Embedder:
     def _normalise(self, features: np.ndarray) -> np.ndarray:
         f = np.asarray(features, dtype=np.float32)
         if f.ndim != 3 or f.shape[1:] != (WORD_FRAMES, FEATURE_DIM):
-            raise ValueError(f"features must be (words, {WORD_FRAMES}, {FEATURE_DIM}), got {f.shape}")
+            raise InputError(f"features must be (words, {WORD_FRAMES}, {FEATURE_DIM}), got {f.shape}")
         return (f - self.params["mean"]) / self.params["std"]
 
     def embed(self, features: np.ndarray) -> np.ndarray:
@@ -160,7 +160,7 @@ def read_embedder(path: Path) -> Embedder:
     emb = Embedder(kind, arr, info)
     try:
         probe = emb.embed(np.zeros((2, WORD_FRAMES, FEATURE_DIM), np.float32))
-    except (ValueError, IndexError) as exc:
+    except (ValueError, IndexError, InputError) as exc:
         raise ModelError(f"embedding weights {path} have inconsistent shapes ({exc}): {fix}") from None
     if not np.all(np.isfinite(probe)) or not np.all(arr["std"] > 0):
         raise ModelError(f"embedding weights {path} hold non-finite numbers: {fix}")

@@ -99,7 +99,7 @@ def frame_features(global_pos, global_root_rot, fps, heading_rot=None) -> np.nda
     global_pos = np.asarray(global_pos, dtype=np.float64)
     global_root_rot = np.asarray(global_root_rot, dtype=np.float64)
     if global_pos.ndim < 3 or global_pos.shape[-2:] != (len(LANDMARKS), 3):
-        raise ValueError(f"global_pos must be (..., frames, {len(LANDMARKS)}, 3), got {global_pos.shape}")
+        raise InputError(f"global_pos must be (..., frames, {len(LANDMARKS)}, 3), got {global_pos.shape}")
     if heading_rot is None:
         heading_rot = _heading_frame(global_root_rot)
     n = global_pos.shape[-3]

@@ -9,6 +9,7 @@ engines' z-scoring never meets an infinity.
 from __future__ import annotations
 
 import numpy as np
+from ..errors import InputError
 
 FLOOR_DB = -100.0
 
@@ -37,7 +38,7 @@ def beat_intensity_db(y: np.ndarray, sr: float, beat_times_s, *, floor_db: float
     """
     y = np.asarray(y)
     if y.ndim != 1:
-        raise ValueError("beat_intensity_db expects mono samples of shape (n,)")
+        raise InputError("beat_intensity_db expects mono samples of shape (n,)")
     beats = np.asarray(beat_times_s, dtype=np.float64)
     if beats.size < 2:
         return np.zeros(0)

@@ -71,9 +71,9 @@ class NoteSequence:
         self.beat_times_s = np.asarray(self.beat_times_s, dtype=np.float64)
         if any(getattr(self, k).shape != (n,) for k in ("pitch", "duration_16", "intensity", "is_beat",
                                                         "sounding_s", "rest_after")):
-            raise ValueError("every per-note array of a NoteSequence needs one value per note")
+            raise InputError("every per-note array of a NoteSequence needs one value per note")
         if n and np.any(np.diff(self.onset_s) <= 0):
-            raise ValueError("note onsets must be strictly increasing (a melody is monophonic)")
+            raise InputError("note onsets must be strictly increasing (a melody is monophonic)")
 
     @property
     def n_notes(self) -> int:

@@ -17,6 +17,7 @@ the onset itself, not on the frame whose window first touches it.
 from __future__ import annotations
 
 import numpy as np
+from ..errors import InputError
 
 ANALYSIS_SR = 22050
 # 441 samples at 22050 Hz = 20 ms: 50 feature frames per second, an exact frame
@@ -89,7 +90,7 @@ def mel_power_spectrogram(y: np.ndarray, sr: float, *, hop_length: int = HOP_LEN
     """
     y = np.asarray(y, dtype=np.float32)
     if y.ndim != 1:
-        raise ValueError(f"expected mono samples of shape (n,), got {y.shape}")
+        raise InputError(f"expected mono samples of shape (n,), got {y.shape}")
     padded = np.pad(y, n_fft // 2)
     n_frames = 1 + len(y) // hop_length
     frames = np.lib.stride_tricks.as_strided(

@@ -91,7 +91,7 @@ def plan_motifs(n_beats: int, template, transitions, rng: np.random.Generator, *
     transitions = np.asarray(transitions, dtype=float)
     k = len(template)
     if transitions.shape != (k, k):
-        raise ValueError(f"transitions must be ({k}, {k}) for {k} motifs, got {transitions.shape}")
+        raise InputError(f"transitions must be ({k}, {k}) for {k} motifs, got {transitions.shape}")
     fixed = dict(fixed or {})
     allowed = transitions > 0
     targets = sorted(b for b in fixed if 0 <= b < n_beats)

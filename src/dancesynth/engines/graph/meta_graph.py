@@ -28,6 +28,7 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components
 from ... import rotations as rot
 from ...motion.accents import cached_accent_beats, fast_beats, limb_turns
 from ...motion.database import Style
+from ...errors import InputError
 
 GRAPH_FORMAT_VERSION = 1
 
@@ -66,9 +67,9 @@ class GraphConfig:
 
     def __post_init__(self):
         if not self.thr > 1.0:
-            raise ValueError("THR must be larger than 1")
+            raise InputError("THR must be larger than 1")
         if not self.ths > 0:
-            raise ValueError("THS must be positive")
+            raise InputError("THS must be positive")
 
     def key(self) -> str:
         return repr(sorted(asdict(self).items()))

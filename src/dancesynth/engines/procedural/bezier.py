@@ -23,6 +23,7 @@ import numpy as np
 
 from .config import ProceduralConfig
 from .keyframes import Keyframes, max_height_scale
+from ...errors import InputError
 
 UP = np.array([0.0, 1.0, 0.0])
 ARC_SAMPLES = 48
@@ -82,7 +83,7 @@ def build_path(keys: Keyframes, cfg: ProceduralConfig) -> BezierPath:
     K, t = keys.pos, keys.times_s
     n = len(K)
     if n < 2:
-        raise ValueError("a path needs at least two keyframes")
+        raise InputError("a path needs at least two keyframes")
     dt = np.diff(t)
     chord = np.diff(K, axis=0)
     A = K[:-1] + chord / 3.0     # straight pieces by default

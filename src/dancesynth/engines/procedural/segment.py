@@ -30,6 +30,7 @@ import numpy as np
 
 from ...music.notes import NoteSequence
 from .config import ProceduralConfig
+from ...errors import InputError
 
 
 def segment_costs(notes: NoteSequence, cfg: ProceduralConfig) -> np.ndarray:
@@ -82,7 +83,7 @@ def segment_prefix(costs: np.ndarray) -> list[tuple[int, int]]:
         k = int(np.argmin(cand))
         best[j], back[j] = cand[k], m[k]
     if not np.isfinite(best[n]):
-        raise ValueError("no segmentation: every segment is longer than max_segment_notes")
+        raise InputError("no segmentation: every segment is longer than max_segment_notes")
     bounds, j = [], n
     while j > 0:
         bounds.append((j - int(back[j]), j))
@@ -116,7 +117,7 @@ def segment_fig2(costs: np.ndarray) -> list[tuple[int, int]]:
         by_start[length, :starts] = single
         by_end[length, length:n + 1] = single
     if not np.isfinite(by_start[n, 0]):
-        raise ValueError("no segmentation: every segment is longer than max_segment_notes")
+        raise InputError("no segmentation: every segment is longer than max_segment_notes")
     bounds, stack = [], [(0, n)]
     while stack:
         a, b = stack.pop()
