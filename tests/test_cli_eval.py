@@ -65,6 +65,17 @@ def test_eval_prints_every_metric_and_writes_json_and_plot(trumpet_dance, tmp_pa
     assert dance["n_transitions"] is not None and dance["warp_rate_min"] > 0.5  # from the report
     assert result["mocap_style"] is not None and dance["jump_p99_vs_mocap"] is not None
     assert out_png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out_png.stat().st_size > 10_000
+    assert "--plot-from" in proc.stdout  # the plot says which seconds it shows and how to choose others
+
+
+def test_eval_plot_window_is_chosen_and_checked(trumpet_dance, tmp_path):
+    """Issue 13: --plot silently showed the first 20 s only."""
+    dance = trumpet_dance / "dance.bvh"
+    proc = run("eval", dance, TRUMPET, "--plot", tmp_path / "late.png", "--plot-from", "2", "--plot-length", "2")
+    assert proc.returncode == 0, proc.stderr
+    assert "2.0-4.0 s of" in proc.stdout and (tmp_path / "late.png").stat().st_size > 10_000
+    assert_clean_failure(run("eval", dance, TRUMPET, "--plot", tmp_path / "x.png", "--plot-from", "99"),
+                         tmp_path / "x.png", "past the song's end")
 
 
 def test_eval_without_a_report_still_measures_what_a_bvh_holds(trumpet_dance):

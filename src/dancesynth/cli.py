@@ -268,6 +268,10 @@ def beats(song, json_path, tracker):
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write every metric as JSON.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Draw speed, kinematic beats and music beats (Aristidou et al. Fig. 7) to a PNG/PDF/SVG.")
+@click.option("--plot-from", type=float, default=0.0, show_default=True,
+              help="Start of the plotted window (seconds); the beats are unreadable over a whole song.")
+@click.option("--plot-length", type=float, default=20.0, show_default=True,
+              help="Length of the plotted window (seconds).")
 @click.option("--reference", "reference_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Also evaluate this motion (e.g. real mocap) against the song, by the same code.")
 @click.option("--style", help="Compare smoothness with this style's mocap (default: the report's or best match).")
@@ -275,12 +279,16 @@ def beats(song, json_path, tracker):
               help="The dance's JSON from 'dancesynth dance --report' (adds transition and time-warp metrics).")
 @click.option("--database", type=click.Path(file_okay=False, path_type=Path),
               help="The database the style comes from (default: the bundled one).")
-def eval_(dance_path, song, json_path, plot_path, reference_path, style, report_path, database):
+def eval_(dance_path, song, json_path, plot_path, plot_from, plot_length, reference_path, style, report_path,
+          database):
     """Measure a dance against its song: beat alignment, intensity, smoothness, foot contact, time warp."""
     from .eval.evaluate import format_table
     from .eval.report import beat_plot_data, evaluate_files, plot_beats
 
     writable(json_path, plot_path)
+    if not (plot_from >= 0 and plot_length > 0):  # NaN too
+        raise InputError(f"the plot window needs --plot-from >= 0 and --plot-length > 0 seconds, got "
+                         f"{plot_from} and {plot_length}")
     result = evaluate_files(dance_path, song, reference_path=reference_path, report_path=report_path,
                             style=style, database=database)
     columns = {"dance": result["dance"]}
@@ -298,9 +306,13 @@ def eval_(dance_path, song, json_path, plot_path, reference_path, style, report_
 
         music = analyze_music(path=song)
         data = beat_plot_data(read_bvh(dance_path), music.beat_times_s)
+        if plot_from >= music.duration_s:
+            raise InputError(f"--plot-from {plot_from:g} s is past the song's end ({music.duration_s:.1f} s)")
+        window = (plot_from, min(plot_from + plot_length, music.duration_s))
         plot_beats(data, plot_path, title=f"{dance_path.name}: speed, kinematic beats, music beats",
-                   window_s=(0.0, min(20.0, music.duration_s)))
-        click.echo(f"wrote  {plot_path}")
+                   window_s=window)
+        click.echo(f"wrote  {plot_path} ({window[0]:.1f}-{window[1]:.1f} s of {music.duration_s:.1f} s; "
+                   "--plot-from and --plot-length choose the window)")
 
 
 @cli.command()
