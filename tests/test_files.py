@@ -33,3 +33,30 @@ def test_a_missing_folder_is_a_clear_error(tmp_path):
     with pytest.raises(InputError, match="does not exist"):
         with atomic_output(tmp_path / "nope" / "out.txt"):
             pass
+
+
+def test_sigterm_during_a_write_leaves_nothing_behind(tmp_path):
+    """Issue 13: SIGTERM while a BVH was being written left a hidden '.part' file."""
+    import signal
+    import subprocess
+    import sys
+
+    script = (
+        "import sys, time\n"
+        "from dancesynth.cli import stop_cleanly_on_sigterm\n"
+        "from dancesynth.io.files import atomic_output\n"
+        "stop_cleanly_on_sigterm()\n"
+        "with atomic_output(sys.argv[1]) as fh:\n"
+        "    fh.write('HIERARCHY')\n"
+        "    print('writing', flush=True)\n"
+        "    time.sleep(60)\n")
+    proc = subprocess.Popen([sys.executable, "-c", script, str(tmp_path / "dance.bvh")], stdout=subprocess.PIPE,
+                            text=True)
+    try:
+        assert proc.stdout.readline().strip() == "writing"
+        assert len(list(tmp_path.iterdir())) == 1  # the .part file, while it is written
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=20) == 128 + signal.SIGTERM
+    finally:
+        proc.kill()
+    assert list(tmp_path.iterdir()) == []

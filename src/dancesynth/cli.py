@@ -20,6 +20,19 @@ def _setup_env() -> None:
     from .motion.database import cache_dir
 
     os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_dir() / "numba"))
+    stop_cleanly_on_sigterm()
+
+
+def stop_cleanly_on_sigterm() -> None:
+    """SIGTERM (``kill``, a service manager, a container stopping) ends the process as an exception
+    would, so half-written outputs are removed on the way out (by default it kills outright and
+    leaves a hidden ``.part`` file behind). The exit code is the usual 128 + 15."""
+    import signal
+
+    def terminate(signum, frame):
+        raise SystemExit(128 + signum)
+
+    signal.signal(signal.SIGTERM, terminate)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
