@@ -16,7 +16,7 @@ from ..errors import InputError
 from ..kinematics import clip_fk
 from ..motion.beats import kinematic_beats as motion_kinematic_beats
 from ..motion.beats import summed_speed
-from ..motion.features import foot_points, interval_energy, kinetic_energy
+from ..motion.features import CONTACT_HEIGHT_M, foot_points, interval_energy, kinetic_energy
 from ..motion.roles import bone_masses, find_roles
 from ..types import MotionClip
 from .beat_metrics import as_times, as_values, check_seconds
@@ -27,7 +27,7 @@ DEFAULT_POLYORDER = 2
 DEFAULT_MIN_SEPARATION_S = 0.1     # a minimum must be the lowest within +-half of this
 DEFAULT_MIN_PROMINENCE_FRAC = 0.05  # of the clip's mean smoothed speed
 DEFAULT_TRANSITION_RADIUS_S = 0.035  # +-2 frames at 60 fps, +-1 at 30 fps
-DEFAULT_CONTACT_HEIGHT_M = 0.05
+DEFAULT_CONTACT_HEIGHT_M = CONTACT_HEIGHT_M  # motion.features': one contact height everywhere
 EDGE_FPS = 30.0                    # EDGE's PFC measures foot motion per 1/30 s frame
 PFC_WINDOW_S = 5.0                 # ... on 5-second clips, averaged
 _STEADY_M_S2 = 1e-6                # a root accelerating less than this does not accelerate

@@ -25,10 +25,8 @@ from .. import rotations as rot
 from ..kinematics import fk
 from ..types import MotionClip
 from .beats import kinematic_beats, summed_speed
-from .features import foot_points
+from .features import CONTACT_HEIGHT_M, foot_points
 from .roles import find_roles
-
-FLOOR_TOL_M = 0.05  # a foot this close to the floor counts as on it (the evaluation's contact height)
 
 
 @dataclass(frozen=True)
@@ -178,7 +176,7 @@ def foot_slide(style) -> np.ndarray:
         speed = np.linalg.norm(np.gradient(feet[..., [0, 2]], axis=0), axis=-1).min(axis=2) * fps  # (F, 2)
         height = feet[..., 1].min(axis=2)
         free = ~np.asarray(style.contacts[a:b], dtype=bool)
-        low = height <= np.median(height.min(axis=1)) + FLOOR_TOL_M
+        low = height <= np.median(height.min(axis=1)) + CONTACT_HEIGHT_M
         low_speed[a:b] = np.where(low & free, speed, 0.0).sum(axis=1)
         accel = np.gradient(np.gradient(root, axis=0), axis=0) * fps * fps
         accel[:, 1] = np.maximum(accel[:, 1], 0.0)  # falling needs no support

@@ -60,7 +60,10 @@ def foot_points(clip: MotionClip, roles: JointRoles, global_rot=None, global_pos
     return out
 
 
-def foot_contacts(feet: np.ndarray, fps: float, *, height_tol_m: float = 0.05,
+CONTACT_HEIGHT_M = 0.05  # a foot this close to the floor is on it (contacts, foot sliding, the evaluation)
+
+
+def foot_contacts(feet: np.ndarray, fps: float, *, height_tol_m: float = CONTACT_HEIGHT_M,
                   speed_tol_m_s: float = 0.35, min_frames: int = 3) -> np.ndarray:
     """(F, 2) booleans: the (left, right) foot is planted.
 
