@@ -202,7 +202,9 @@ def _mp3(tmp_path, seconds: float) -> bytes:
 
 
 @pytest.mark.slow
-def test_a_radio_that_sends_garbage_then_goes_off_air_mid_segment_ends_the_dance_cleanly(tmp_path):
+def test_a_radio_that_sends_garbage_then_goes_off_air_mid_segment_ends_the_dance_and_says_so(tmp_path):
+    """The dance up to the end is kept, complete; since issue 13 the user also learns that the source died
+    (exit 2, one line), where it once ended with exit 0 and no notice."""
     mp3 = _mp3(tmp_path, 8.0)
     half = len(mp3) // 2
     garbage = np.random.default_rng(2).bytes(8000)  # one second's worth of noise bytes in the middle
@@ -210,8 +212,10 @@ def test_a_radio_that_sends_garbage_then_goes_off_air_mid_segment_ends_the_dance
     out = tmp_path / "live.bvh"
     with http_folder(tmp_path, handler=_Radio) as url:
         proc = run("stream", f"{url}/radio", "-o", out, "--segment-seconds", "3", timeout=120)
-    assert proc.returncode == 0, proc.stderr
+    assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr
+    error = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
+    assert len(error) == 1 and "broke off after" in error[0] and "Input/output error" in error[0]
     clip = read_bvh(out)
     # It goes off air 8 s in (mid-segment): the dance covers what was heard, plus the time the
     # dancer kept dancing while ffmpeg tried to reconnect (reported as stalls bridged), no more.

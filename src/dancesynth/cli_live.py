@@ -47,6 +47,7 @@ def stream(source, output, segment_seconds, style, fps, seed, database, follow_s
         summary = run_live(src, writer.append, config=config, on_report=report, realtime=not fast)
     if summary["frames"] == 0:
         raise InputError(f"{source}: the stream ended before a single segment could be danced")
+    broke_off = src.error.removeprefix(f"{source}: ") if src.network else ""
     click.echo(f"style     {summary['style']}, {summary['tempo_bpm']:.1f} bpm")
     click.echo(f"segments  {summary['segments']} of {segment_seconds:g} s, step median "
                f"{summary['step_s_median'] * 1e3:.1f} ms, max {summary['step_s_max'] * 1e3:.1f} ms, "
@@ -57,6 +58,9 @@ def stream(source, output, segment_seconds, style, fps, seed, database, follow_s
     if summary["motif_chi2"] is not None:
         click.echo(f"motifs    chi2 to the genre template {summary['motif_chi2']:.3f}")
     click.echo(f"wrote     {output} ({summary['frames']} frames at {fps:g} fps)")
+    if broke_off:  # the BVH is complete up to there; the user must still learn that the source died
+        raise InputError(f"{source}: the stream broke off after {src.heard_s:.1f} s of audio ({broke_off}); "
+                         f"{output} holds the dance up to then")
 
 
 @click.command()

@@ -52,10 +52,11 @@ class AudioSource:
         stdin = subprocess.DEVNULL
         # Live inputs start decoding after 0.5 s of audio, not after ffmpeg's default 5 s of probing.
         quick_probe = ["-probesize", "65536", "-analyzeduration", "500000"]
+        self.network = spec.startswith(("http://", "https://"))
         if spec == "-":
             cmd = [exe, "-hide_banner", "-loglevel", "error", *quick_probe, "-i", "pipe:0"]
             stdin = None  # ffmpeg reads our standard input
-        elif spec.startswith(("http://", "https://")):
+        elif self.network:
             # -re: a whole file served over http plays at its pace too; a live stream sets its own.
             cmd += (["-re"] if realtime else []) + [
                 "-reconnect", "1", "-reconnect_streamed", "1", "-reconnect_delay_max", "4",
@@ -86,8 +87,11 @@ class AudioSource:
         finally:
             self._proc.wait()
             err = self._proc.stderr.read().decode("utf-8", "replace").strip() if self._proc.stderr else ""
-            if self._proc.returncode not in (0, None) and err:
-                self.error = err.splitlines()[-1][:300]
+            # A network source that gives up after its reconnects still exits 0; its last word is then
+            # "URL: Input/output error" (a reconnect that succeeds leaves only "[http @ ...]" notes).
+            last = err.splitlines()[-1] if err else ""
+            if last and (self._proc.returncode not in (0, None) or (self.network and last.startswith(self.spec))):
+                self.error = last[:300]
             self._queue.put(None)
 
     def read(self, timeout: float) -> Chunk | None:
