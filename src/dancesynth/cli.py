@@ -76,7 +76,7 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
           database, max_minutes, ths, thr, paper, report_path, quiet):
     """Make a beat-synchronised dance for SONG (wav, ogg, flac, mp3, ...) and write it as BVH."""
     from .api import DanceConfig, dance as make_dance
-    from .io.bvh import format_bvh, write_bvh
+    from .io.bvh import format_bvh
     from .io.files import atomic_output
 
     output = output or Path(song.stem + ".bvh")
@@ -103,14 +103,15 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
     finally:
         progress.close()
     t = time.perf_counter()
-    if report_path is None:
-        write_bvh(output, clip)
-    else:  # both or neither: a report that cannot be written must not leave its dance behind
+    report = None
+    if report_path is not None:
         from .eval.report import dance_report
 
         report = dance_report(clip)
-        with atomic_output(output, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write(format_bvh(clip))
+    # The BVH and the report both or neither: a report that cannot be written leaves no dance behind.
+    with atomic_output(output, "w", encoding="utf-8", newline="\n") as fh:
+        fh.write(format_bvh(clip))
+        if report is not None:
             write_json(report_path, report)
     s = clip.meta["summary"]
     s["timings_s"]["write_s"] = time.perf_counter() - t

@@ -268,21 +268,26 @@ class _Busy(DanceSynthError):
     pass
 
 
+def parse_seed(text: str | None) -> int | None | bool:
+    """A seed sent by the page: None when empty, the number, or False when it is no whole number
+    from 0 to ``MAX_SEED`` ("-1", "--5", "abc")."""
+    if not text:
+        return None
+    return int(text) if text.isascii() and text.isdigit() and int(text) <= MAX_SEED else False
+
+
 async def watch(ws, hub: LiveHub) -> None:
     """Serve one viewer of ``/ws/live?url=...&segment_s=...&style=...&seed=...`` until the dance or the viewer ends."""
     q = ws.query_params
     url = q.get("url", "").strip()
     try:
         segment_s = float(q.get("segment_s") or 5.0)
-        seed_text = q.get("seed") or ""
-        if seed_text and not (seed_text.isdigit() and int(seed_text) <= MAX_SEED):  # "-1", "--5": no
-            raise ValueError(seed_text)
-        seed = int(seed_text) if seed_text else None
     except ValueError:
-        segment_s = seed = None
+        segment_s = None
+    seed = parse_seed(q.get("seed"))
     if not url.startswith(("http://", "https://")):
         return await _refuse(ws, "give the stream as ?url=http(s)://...")
-    if segment_s is None or not 1.0 <= segment_s <= 30.0:
+    if segment_s is None or not 1.0 <= segment_s <= 30.0 or seed is False:
         return await _refuse(ws, "segment_s must be a number from 1 to 30 and seed a whole number")
     try:
         broadcast, viewer = hub.join(url, segment_s, q.get("style") or None, seed)

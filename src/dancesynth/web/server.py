@@ -39,7 +39,7 @@ from starlette.websockets import WebSocket
 
 from ..errors import DanceSynthError, InputError
 from ..types import MAX_SEED
-from .live import LiveHub, watch
+from .live import LiveHub, parse_seed, watch
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 MUSIC_DIR = Path(__file__).resolve().parents[1] / "data" / "music"
@@ -114,10 +114,6 @@ class UploadStore:
             entry["served"] = True
         p = self.dir / key
         return p if p.is_file() else None
-
-    def __len__(self) -> int:
-        with self._lock:
-            return len(self._files)
 
     def _prune(self, keep: int) -> None:
         now = time.time()
@@ -217,9 +213,9 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
         try:
             style = _text(form, "style") or None
             seed_text = _text(form, "seed")
-            if seed_text and not (seed_text.isdigit() and int(seed_text) <= MAX_SEED):  # "-1", "--5": no
+            seed = parse_seed(seed_text)
+            if seed is False:
                 return _error(400, f"seed {seed_text!r} must be a whole number from 0 to {MAX_SEED} (e.g. 7) or empty")
-            seed = int(seed_text) if seed_text else None
             audio = form.get("audio")
             song_name = _text(form, "song")
             if isinstance(audio, UploadFile) and (audio.filename or audio.size):
