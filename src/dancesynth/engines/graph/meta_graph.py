@@ -144,17 +144,20 @@ class MetaMotionGraph:
 
 
 def joint_weights(style: Style) -> np.ndarray:
-    """w(m) of eq. (3): the bone length a joint's rotation moves (its subtree), normalised.
+    """w(m) of eq. (3), normalised: a joint weighs the bone length of its subtree (the bone into
+    the joint included), and the root as much as all the other joints together.
 
-    A hip or spine rotation moves most of the body, a finger almost nothing; joints
-    that never move get weight 0 and are skipped.
+    A hip or spine rotation moves most of the body, a finger almost nothing. The root's
+    rotation (its heading removed: how the body leans and tilts) is half of the distance,
+    so two beats whose limbs match but whose bodies lean differently are far apart: a jump
+    between them would swing the whole body. (The paper leaves w(m) to its reference [9].)
+    Joints that never move get weight 0 and are skipped.
     """
     sk = style.skeleton
-    length = np.linalg.norm(sk.offsets, axis=1)
-    subtree = length.copy()
+    subtree = np.linalg.norm(sk.offsets, axis=1)
     for j in range(sk.n_joints - 1, 0, -1):
         subtree[sk.parents[j]] += subtree[j]
-    subtree[0] = subtree.sum() - subtree[0]
+    subtree[0] = subtree[1:].sum()
     moving = np.any(np.abs(style.local_rot - style.local_rot[:1]) > 1e-5, axis=(0, 2))
     w = np.where(moving, subtree, 0.0)
     return w / max(w.sum(), 1e-12)
