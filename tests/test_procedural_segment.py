@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import itertools
-import time
 
 import numpy as np
 import pytest
@@ -79,13 +78,12 @@ def test_segments_turn_on_beats_and_have_the_ideal_length():
     assert abs(np.median(dur) - cfg.ideal_duration) <= 4
 
 
-def test_two_thousand_notes_segment_in_seconds():
+def test_two_thousand_notes_are_all_segmented():
+    # (how fast: benchmarks/procedural_bench.py)
     notes = random_melody(2000, seed=1)
-    cfg = ProceduralConfig()
-    t = time.perf_counter()
-    bounds = segment(notes, cfg)
-    assert time.perf_counter() - t < 2.0
-    assert bounds[-1][1] == 2000
+    bounds = segment(notes, ProceduralConfig())
+    assert bounds[0][0] == 0 and bounds[-1][1] == 2000
+    assert all(a[1] == b[0] for a, b in zip(bounds, bounds[1:]))
 
 
 def test_segment_longer_than_the_bound_is_impossible():
