@@ -98,14 +98,14 @@ def measure(clip, style, ref: StyleReference) -> dict:
     from dancesynth.motion.resample import sample_frames
     from dancesynth.types import MotionClip
 
-    jumps = np.asarray(clip.meta["transition_times_s"], dtype=float)
+    jumps = np.asarray(clip.provenance.transition_times_s, dtype=float)
     jumps = jumps[(jumps >= 0) & (jumps <= clip.duration_s)]
     ev = evaluate(clip, transitions_s=jumps, mocap=ref.jumps)
     # The source as played: the mocap at the dance's source frames (time warp included), no blend,
     # no foot lock, not re-placed; at a cut it teleports.
-    local, root, _ = sample_frames(style.local_rot, style.root_pos, clip.meta["source_frames"])
+    local, root, _ = sample_frames(style.local_rot, style.root_pos, clip.provenance.source_frames)
     played = MotionClip(clip.skeleton, clip.fps, root, local)
-    cuts = np.ceil(np.asarray(clip.meta["transition_times_s"]) * clip.fps - 1e-9).astype(np.int64) - 1
+    cuts = np.ceil(np.asarray(clip.provenance.transition_times_s) * clip.fps - 1e-9).astype(np.int64) - 1
     steps = new_steps(clip, local, cuts=cuts)
     source_skate = _skate_away_from(played, cuts)
     return {"style": style.name, "duration_s": clip.duration_s, "transitions": int(len(jumps)),
@@ -135,7 +135,7 @@ def _vs_own_beats(clip, style, jumps, p99):
 
     if not len(jumps) or not p99:
         return None
-    src = np.asarray(clip.meta["source_frames"], dtype=float)
+    src = np.asarray(clip.provenance.source_frames, dtype=float)
     at_join = mm.transition_jumps(clip, jumps)
     worst = 0.0
     for t, jump in zip(jumps, at_join):
@@ -191,7 +191,7 @@ def run(songs, engines, mix_s, styles=(), progress=print) -> dict:
                 t = time.perf_counter()
                 kw = {"engine": "global"} if engine == "global" else {"follow_signature": engine == "signature"}
                 clip = dance(music, database=db, style=style_name, **kw)
-                style = db.styles[clip.meta["style"]]
+                style = db.styles[clip.provenance.style]
                 if (style.name, clip.fps) not in refs:
                     refs[(style.name, clip.fps)] = StyleReference(style, clip.fps)
                 row = {"song": name, "engine": engine, **measure(clip, style, refs[(style.name, clip.fps)]),

@@ -69,7 +69,7 @@ def bench_song(path: Path, out: Path) -> dict:
     clip = conduct(path)
     t_write = time.perf_counter()
     write_bvh(out, clip)
-    s = clip.meta["summary"]
+    s = clip.provenance.summary
     done = time.perf_counter()
     return {"song": path.name, "input": s["input"], "duration_s": s["duration_s"], "notes": s["notes"],
             "segments": s["segments"], "frames": s["frames"], "total_s": done - t, "write_s": done - t_write,

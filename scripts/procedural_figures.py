@@ -23,18 +23,19 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "src"))
 
-from dancesynth.engines.procedural import conduct_notes, make_config  # noqa: E402
+from dancesynth.engines.procedural import conduct_notes, default_skeleton, make_config  # noqa: E402
 from dancesynth.engines.procedural.engine import plan_right_hand  # noqa: E402
 from dancesynth.engines.procedural.segment import segment  # noqa: E402
 from dancesynth.engines.procedural.speed import sample_path  # noqa: E402
 from dancesynth.eval import groundtruth as gt  # noqa: E402
 from dancesynth.kinematics import clip_fk  # noqa: E402
 from dancesynth.motion.roles import find_roles  # noqa: E402
+from dancesynth.motion.database import open_database  # noqa: E402
 from dancesynth.music.notes import DRUM_CHANNEL, midi_notes, write_midi_parts  # noqa: E402
 
 
 def _conduct(notes):
-    clip = conduct_notes(notes)
+    clip = conduct_notes(notes, skeleton=default_skeleton(open_database()))
     return clip, clip_fk(clip)[1], find_roles(clip.skeleton)
 
 

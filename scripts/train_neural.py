@@ -46,17 +46,17 @@ def evaluate_model(seeds: int) -> dict:
             t = time.perf_counter()
             clip = dance(music, engine="neural", style="salsa", seed=seed)
             wall = time.perf_counter() - t
-            style = db.styles[clip.meta["style"]]
+            style = db.styles[clip.provenance.style]
             if style.name not in refs:
                 refs[style.name] = mocap_reference([style.clip(c) for c in range(style.n_clips)], clip.fps)
             m = evaluate(clip, music_beats_s=music.beat_times_s, music_loudness_db=music.intensity_db,
                          mocap=refs[style.name])
             # As the benchmark's Table I: words cut at the beats it dances to, found again in the motion.
-            found = found_motifs(clip, motifs, clip.meta["grid_times_s"])
-            plan = clip.meta["motifs"][:len(found)]
+            found = found_motifs(clip, motifs, clip.provenance.grid_times_s)
+            plan = clip.provenance.motifs["motif_plan"][:len(found)]
             rows.append({"song": song.name, "seed": seed, "style": style.name, "duration_s": music.duration_s,
-                         "synthesis_s": clip.meta["summary"]["timings_s"]["synthesis_s"], "dance_s": wall,
-                         "realtime_x": clip.meta["summary"]["realtime_factor"],
+                         "synthesis_s": clip.provenance.summary["timings_s"]["synthesis_s"], "dance_s": wall,
+                         "realtime_x": clip.provenance.summary["realtime_factor"],
                          "chi2_salsa": chi2(template, np.bincount(found, minlength=motifs.k)),
                          "plan_followed": float(np.mean(found == plan)), **{k: m[k] for k in KEYS}})
             print(json.dumps(rows[-1]), file=sys.stderr)

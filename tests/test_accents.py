@@ -224,7 +224,7 @@ def test_the_dance_stops_on_the_beats_far_above_chance_and_a_random_walk(vibe, b
     # (accent timing included) scores less (measured P / R / F 0.80 / 0.87 / 0.83 against
     # 0.78 / 0.83 / 0.81). The margin was 0.06 in F before the intensity match got its weight
     # (EngineConfig.intensity_weight 8, Spearman 0.35 -> 0.49 on this song): it is a trade.
-    style = bundled_db.styles[dance(vibe, database=bundled_db).meta["style"]]
+    style = bundled_db.styles[dance(vibe, database=bundled_db).provenance.style]
     walk = _accents(walk_dance(style, vibe), vibe)
     assert ours["accent_precision"] > walk["accent_precision"] and ours["accent_recall"] > walk["accent_recall"]
     assert _f(ours) > _f(walk) + 0.02
@@ -276,7 +276,7 @@ def test_looking_ahead_on_a_tiny_style_never_runs_out_of_path(bundled_db):
                           beats_per_bar=4, beat_in_bar=np.arange(300) % 4)
     clip = dance(music, database=bundled_db, style="whirl", lookahead_s=5.0)
     assert clip.duration_s == pytest.approx(music.duration_s, abs=1 / clip.fps)
-    assert clip.meta["summary"]["lookahead_s"] == 5.0
+    assert clip.provenance.summary["lookahead_s"] == 5.0
 
 def _f(scores):
     p, r = scores["accent_precision"], scores["accent_recall"]
@@ -314,13 +314,13 @@ def test_a_waltz_is_danced_in_three_by_a_style_that_can_when_the_best_fit_cannot
     fits = [f.style.name for f in fit_styles(bundled_db, music)]
     assert len(fits) > 1
     clip = dance(music, database=bundled_db)
-    summary = clip.meta["summary"]
+    summary = clip.provenance.summary
     # mj's moves keep their fours on a waltz (energy period 4); the chooser tries the next style.
     assert summary["dance_period_beats"] == 3, summary
     assert summary["styles_tried_for_metre"][0] == fits[0] != summary["style"]
     assert not any("3/4" in w for w in summary.get("warnings", []))
     # The same waltz in a style named by the user is danced in that style, in three or not.
-    assert dance(music, database=bundled_db, style=fits[0]).meta["summary"]["style"] == fits[0]
+    assert dance(music, database=bundled_db, style=fits[0]).provenance.summary["style"] == fits[0]
 
 
 def test_a_waltz_no_well_fitting_style_dances_in_three_takes_one_that_does_and_says_so(bundled_db):
@@ -335,7 +335,7 @@ def test_a_waltz_no_well_fitting_style_dances_in_three_takes_one_that_does_and_s
     music = MusicFeatures(beats[-1] + 0.4, beats, loud, 100.0, beats_per_bar=3, beat_in_bar=pos)
     fits = fit_styles(bundled_db, music, min_share=METRE_SHARE)
     clip = dance(music, database=bundled_db)
-    summary = clip.meta["summary"]
+    summary = clip.provenance.summary
     assert summary["dance_period_beats"] == 3, summary
     chosen = next(f for f in fits if f.style.name == summary["style"])
     assert chosen.for_metre and METRE_SHARE <= chosen.share < fits[0].share
@@ -343,4 +343,4 @@ def test_a_waltz_no_well_fitting_style_dances_in_three_takes_one_that_does_and_s
     assert any("in three" in w for w in summary["warnings"]), summary["warnings"]
     # A 4/4 song at the same tempo keeps the best fit.
     four = MusicFeatures(beats[-1] + 0.4, beats, loud, 100.0, beats_per_bar=4, beat_in_bar=np.arange(60) % 4)
-    assert dance(four, database=bundled_db).meta["summary"]["style"] == fits[0].style.name
+    assert dance(four, database=bundled_db).provenance.summary["style"] == fits[0].style.name

@@ -223,9 +223,9 @@ def test_real_dances_have_no_snaps_and_no_transition_rougher_than_the_mocap(bund
     from dancesynth.motion.resample import sample_frames
 
     clip = dance(song_music, database=bundled_db, engine=engine)
-    style = bundled_db.styles[clip.meta["style"]]
-    source, _, _ = sample_frames(style.local_rot, style.root_pos, clip.meta["source_frames"])
-    jumps = np.asarray(clip.meta["transition_times_s"])
+    style = bundled_db.styles[clip.provenance.style]
+    source, _, _ = sample_frames(style.local_rot, style.root_pos, clip.provenance.source_frames)
+    jumps = np.asarray(clip.provenance.transition_times_s)
     cuts = np.ceil(jumps * clip.fps - 1e-9).astype(np.int64) - 1
     snaps = new_steps(clip, source, cuts=cuts)
     assert snaps.size == 0, [(int(f), clip.skeleton.names[j]) for f, j in snaps]

@@ -6,6 +6,7 @@ import os
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -223,3 +224,20 @@ def test_a_full_disk_is_a_one_line_error_naming_the_file(tmp_path):
             fh.write("x")
             raise OSError(28, "No space left on device")
     assert not target.exists() and not list(tmp_path.iterdir())
+
+
+def test_ctrl_c_while_the_command_starts_says_interrupted_without_a_traceback():
+    import signal
+
+    command = Path(sys.executable).parent / "dancesynth"
+    for delay in (0.05, 0.1, 0.15, 0.2, 0.3, 0.4):
+        # Ctrl-C's default action restored in the child (a shell's background job would ignore it).
+        proc = subprocess.Popen([str(command), "styles"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        time.sleep(delay)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+        assert "Traceback" not in err, (delay, err)
+        assert proc.returncode in (0, 130, -signal.SIGINT), (delay, proc.returncode, err)
+        if proc.returncode == 130:
+            assert err.strip().splitlines()[-1] == "interrupted"

@@ -39,10 +39,10 @@ def salsa_dance(bundled_db):
 def test_every_music_beat_shows_a_motion_beat_frame(salsa_dance, bundled_db):
     """Each music beat shows a motion beat exactly (the accent timing eases in and out of it)."""
     clip = salsa_dance
-    style = bundled_db.styles[clip.meta["style"]]
+    style = bundled_db.styles[clip.provenance.style]
     beat_frames = set(style.beat_frames.tolist())
-    src = clip.meta["source_frames"]
-    for t in clip.meta["music_beat_times_s"]:
+    src = clip.provenance.source_frames
+    for t in clip.provenance.music_beat_times_s:
         f = int(round(t * FPS))
         assert abs(src[f] - round(src[f])) < 1e-6, f"beat at {t:.3f} s shows a fractional source frame"
         assert int(round(src[f])) in beat_frames
@@ -57,14 +57,14 @@ def test_output_covers_the_whole_song_at_the_requested_rate(salsa_dance):
 
 def test_joins_are_as_smooth_as_the_mocap_itself(salsa_dance, bundled_db):
     """No frame-to-frame change at a jump or a segment boundary beyond what the captured dance does."""
-    style = bundled_db.styles[salsa_dance.meta["style"]]
+    style = bundled_db.styles[salsa_dance.provenance.style]
     step = int(round(style.fps / FPS))
     src = style.local_rot[::step].astype(float)
     inside = np.ones(len(src) - 1, bool)
     inside[(style.clip_starts[1:-1] // step) - 1] = False
     mocap_p999 = np.percentile(max_joint_step_deg(src)[inside], 99.9)
     out = max_joint_step_deg(salsa_dance.local_rot)
-    joins = np.r_[salsa_dance.meta["transition_times_s"], salsa_dance.meta["segment_times_s"]]
+    joins = np.r_[salsa_dance.provenance.transition_times_s, salsa_dance.provenance.run.segment_times_s]
     for t in joins:
         f = int(np.floor(t * FPS))
         window = out[max(f - 2, 0):f + 3]
@@ -79,7 +79,7 @@ def test_streaming_segments_join_exactly_like_one_long_render(bundled_db):
     a = dance(song, database=bundled_db, style="jpop", segment_s=3.0)
     b = dance(song, database=bundled_db, style="jpop", segment_s=7.0)
     assert a.n_frames == b.n_frames
-    assert a.meta["summary"]["segments"] > b.meta["summary"]["segments"]
+    assert a.provenance.summary["segments"] > b.provenance.summary["segments"]
 
 
 @pytest.mark.parametrize("engine", ["streaming", "global"])
@@ -88,8 +88,8 @@ def test_engines_are_deterministic_and_seeds_vary_the_dance(bundled_db, engine):
     a = dance(song, database=bundled_db, engine=engine, seed=1)
     b = dance(song, database=bundled_db, engine=engine, seed=1)
     np.testing.assert_array_equal(a.local_rot, b.local_rot)
-    others = [dance(song, database=bundled_db, engine=engine, seed=s).meta["source_frames"] for s in (2, 3, 4, 5)]
-    assert any(not np.array_equal(o, a.meta["source_frames"]) for o in others)
+    others = [dance(song, database=bundled_db, engine=engine, seed=s).provenance.source_frames for s in (2, 3, 4, 5)]
+    assert any(not np.array_equal(o, a.provenance.source_frames) for o in others)
 
 
 def test_ten_minute_songs_never_run_out_of_path_on_any_style(bundled_db):
@@ -119,7 +119,7 @@ def test_foot_lock_holds_planted_feet(bundled_db):
     song = music(40.0, 135.0, seed=3)
     plain = dance(song, database=bundled_db, style="salsa", render=EngineConfig(foot_lock=False))
     locked = dance(song, database=bundled_db, style="salsa", render=EngineConfig(foot_lock=True))
-    assert plain.meta["summary"]["transitions"] > 0
+    assert plain.provenance.summary["transitions"] > 0
     held, free = planted_ankle_speed(locked), planted_ankle_speed(plain)
     assert held.mean() < 0.5 * free.mean()
     assert np.median(held) < 0.01
@@ -168,7 +168,7 @@ def test_jump_cost_trades_transitions_for_continuity(bundled_db):
     song = music(40.0, 132.0, seed=5)
     free = dance(song, database=bundled_db, style="salsa", render=EngineConfig(jump_cost=0.0))
     costly = dance(song, database=bundled_db, style="salsa", render=EngineConfig(jump_cost=1.0))
-    assert costly.meta["summary"]["transitions"] < free.meta["summary"]["transitions"]
+    assert costly.provenance.summary["transitions"] < free.provenance.summary["transitions"]
 
 
 def test_the_papers_exact_objective_still_dances(bundled_db):
@@ -177,7 +177,7 @@ def test_the_papers_exact_objective_still_dances(bundled_db):
     clip = dance(music(30.0, 130.0), database=bundled_db, style="salsa", graph=GraphConfig.paper(),
                  render=EngineConfig.paper())
     assert clip.n_frames == int(30.0 * FPS) + 1
-    assert clip.meta["summary"]["graph_mean_in_degree"] < 2.0  # literal eq. (1) leaves few transitions
+    assert clip.provenance.summary["graph_mean_in_degree"] < 2.0  # literal eq. (1) leaves few transitions
 
 
 def test_a_tiny_database_still_dances_a_long_song(tmp_path):
@@ -193,7 +193,7 @@ def test_a_tiny_database_still_dances_a_long_song(tmp_path):
     db = open_database(tmp_path / "tiny")
     clip = dance(music(60.0, 100.0), database=db)
     assert clip.n_frames == int(60.0 * FPS) + 1
-    assert clip.meta["summary"]["graph_nodes"] < 10
+    assert clip.provenance.summary["graph_nodes"] < 10
 
 
 def test_a_database_of_too_short_clips_is_a_clear_error(tmp_path):

@@ -30,7 +30,7 @@ def music():
 def test_neural_dance_with_the_shipped_model(music):
     assert find_model("salsa").parent == SHIPPED
     clip = dance(music, engine="neural", style="salsa", seed=2)
-    s = clip.meta["summary"]
+    s = clip.provenance.summary
     assert clip.n_frames == pytest.approx(music.duration_s * 30, abs=1.5)
     assert np.isfinite(clip.local_rot).all() and np.isfinite(clip.root_pos).all()
     assert s["realtime_factor"] >= 5
@@ -41,7 +41,7 @@ def test_neural_dance_with_the_shipped_model(music):
     moved = np.linalg.norm(np.diff(pos[:, roles.wrists[0]], axis=0), axis=-1).sum()
     assert moved > 10.0                                       # it dances: the hand travels metres, not a statue
     # The beat warp never freezes the dancer: not at the start, the end or anywhere between.
-    assert clip.meta["warp_rates"].min() > 0.2
+    assert clip.provenance.warp_rates.min() > 0.2
     assert np.all(np.linalg.norm(np.diff(pos[:, 0], axis=0), axis=-1)[:5] > 0) and \
         np.all(np.abs(np.diff(clip.local_rot[-5:], axis=0)).max(axis=(1, 2)) > 0)
     other = dance(music, engine="neural", style="salsa", seed=3)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from procedural_songs import chorale_midi, phrase_song
 
-from dancesynth.engines.procedural import ProceduralConfig, conduct_notes
+from dancesynth.engines.procedural import ProceduralConfig, conduct_notes, default_skeleton
 from dancesynth.engines.procedural.bezier import bezier_tangents
 from dancesynth.engines.procedural.engine import plan_right_hand
 from dancesynth.engines.procedural.segment import segment
@@ -33,8 +33,13 @@ def songs(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def clips(songs):
-    return {k: conduct_notes(n) for k, n in songs.items()}
+def skeleton(bundled_db):
+    return default_skeleton(bundled_db)
+
+
+@pytest.fixture(scope="module")
+def clips(songs, skeleton):
+    return {k: conduct_notes(n, skeleton=skeleton) for k, n in songs.items()}
 
 
 def _positions(clip):
@@ -54,13 +59,13 @@ def test_hands_stay_in_reach_and_elbows_in_their_limits(clips):
         assert flex.min() >= cfg.elbow_min - 1e-6 and flex.max() <= cfg.elbow_max + 1e-6
 
 
-def test_hand_speed_stays_under_the_limit(songs, clips):
+def test_hand_speed_stays_under_the_limit(songs, clips, skeleton):
     for name, clip in clips.items():
         pos, roles = _positions(clip)
         speed = np.linalg.norm(np.diff(pos[:, roles.wrists[1]], axis=0), axis=1) * clip.fps
         assert speed.max() / clip.meta["arm_length"][1] <= ProceduralConfig().speed_limit, name
     # A lower limit slows the same song down.
-    slow = conduct_notes(songs["drums"], ProceduralConfig(speed_limit=1.5))
+    slow = conduct_notes(songs["drums"], ProceduralConfig(speed_limit=1.5), skeleton=skeleton)
     pos, roles = _positions(slow)
     speed = np.linalg.norm(np.diff(pos[:, roles.wrists[1]], axis=0), axis=1) * slow.fps
     assert speed.max() / slow.meta["arm_length"][1] <= 1.5 * 1.1
@@ -159,7 +164,7 @@ def test_legs_stand_still_on_the_ground(clips):
     assert np.ptp(clip.root_pos, axis=0).max() == 0.0
 
 
-def test_bvh_round_trip_and_determinism(tmp_path, songs, clips):
+def test_bvh_round_trip_and_determinism(tmp_path, songs, clips, skeleton):
     clip = clips["phrases"]
     write_bvh(tmp_path / "c.bvh", clip)
     back = read_bvh(tmp_path / "c.bvh", to_metres=False)
@@ -167,16 +172,16 @@ def test_bvh_round_trip_and_determinism(tmp_path, songs, clips):
     _, b = clip_fk(back)
     assert back.n_frames == clip.n_frames
     assert np.max(np.abs(a - b)) < 1e-4
-    again = conduct_notes(songs["phrases"])
+    again = conduct_notes(songs["phrases"], skeleton=skeleton)
     assert np.array_equal(again.local_rot, clip.local_rot)
 
 
-def test_larger_l1_draws_larger_curves(songs):
+def test_larger_l1_draws_larger_curves(songs, skeleton):
     notes = songs["drums"]
     extent = {}
     for style in ("e1", "e2"):
         from dancesynth.engines.procedural import make_config
 
-        clip = conduct_notes(notes, make_config(style=style))
+        clip = conduct_notes(notes, make_config(style=style), skeleton=skeleton)
         extent[style] = np.ptp(clip.meta["right_hand_plan"][:, 1])
     assert extent["e1"] > extent["e2"]

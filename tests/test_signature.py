@@ -65,13 +65,13 @@ def test_an_over_danced_motif_costs_and_an_owed_one_earns():
 
 
 def test_following_the_signature_brings_the_dance_closer_to_the_genre(dances, song, bundled_db):
-    assert "motif_chi2" not in dance(song, database=bundled_db, style="salsa").meta["summary"]  # only when asked
-    plain, followed = ([d.meta["summary"]["motif_chi2"] for d in dances[f]] for f in (False, True))
+    assert "motif_chi2" not in dance(song, database=bundled_db, style="salsa").provenance.summary  # only when asked
+    plain, followed = ([d.provenance.summary["motif_chi2"] for d in dances[f]] for f in (False, True))
     template = load_motif_model().templates["salsa"]
     for d in dances[True]:
-        ids = d.meta["motif_ids"]
-        assert len(ids) == len(d.meta["grid_times_s"]) - 1 and np.all(ids >= 0)
-        assert d.meta["summary"]["motif_chi2"] == pytest.approx(chi2(template, np.bincount(ids, minlength=48)))
+        ids = d.provenance.motifs["motif_ids"]
+        assert len(ids) == len(d.provenance.grid_times_s) - 1 and np.all(ids >= 0)
+        assert d.provenance.summary["motif_chi2"] == pytest.approx(chi2(template, np.bincount(ids, minlength=48)))
     # Measured: 0.24 without the term, 0.08-0.09 with it (weight 1.0).
     assert np.mean(followed) < 0.7 * np.mean(plain), (plain, followed)
     assert max(followed) < 0.1, followed
@@ -90,17 +90,17 @@ def test_the_dance_still_follows_the_music_intensity(dances, song):
 def test_the_signature_converges_as_the_song_goes_on(dances):
     template = load_motif_model().templates["salsa"]
     for d in dances[True]:
-        ids = d.meta["motif_ids"]
+        ids = d.provenance.motifs["motif_ids"]
         early = chi2(template, np.bincount(ids[:len(ids) // 4], minlength=48))
         assert chi2(template, np.bincount(ids, minlength=48)) < 0.6 * early
 
 
 def test_every_music_beat_still_shows_a_motion_beat_frame(dances, bundled_db):
     for clip in dances[True]:
-        style = bundled_db.styles[clip.meta["style"]]
+        style = bundled_db.styles[clip.provenance.style]
         beat_frames = set(load_graph(style)[0].render_frame.tolist())  # the frames the graph shows on beats
-        src = clip.meta["source_frames"]
-        for t in clip.meta["music_beat_times_s"]:
+        src = clip.provenance.source_frames
+        for t in clip.provenance.music_beat_times_s:
             f = int(round(t * FPS))
             assert abs(src[f] - round(src[f])) < 1e-6 and int(round(src[f])) in beat_frames
 

@@ -124,9 +124,9 @@ def test_expected_share_counts_the_styles_own_beat_intervals(bundled_db):
 
 
 def test_whirl_on_a_119_bpm_song_fits_or_warns(whirl_on_fishin):
-    s = whirl_on_fishin.meta["summary"]
+    s = whirl_on_fishin.provenance.summary
     assert s["style"] == "whirl" and s["level"] in ("beat", "double time", "half time")
-    assert s["in_range_actual"] == pytest.approx(in_range(whirl_on_fishin.meta["warp_rates"]))
+    assert s["in_range_actual"] == pytest.approx(in_range(whirl_on_fishin.provenance.warp_rates))
     # 81 bpm against 119 bpm is a 2:3 relation: no level fits it, and the user is told.
     assert s["in_range_actual"] >= TARGET_SHARE or s["warnings"]
     assert s["in_range_expected"] < TARGET_SHARE
@@ -138,12 +138,12 @@ def test_a_forced_style_is_danced_at_the_level_nearest_its_speed(songs, bundled_
     music = songs[VIBE_ACE.name]
     fits = {f.subdivide: f for f in style_fits(bundled_db, np.diff(music.beat_times_s), "whirl")}
     clip = dance(music, database=bundled_db, style="whirl")
-    s = clip.meta["summary"]
+    s = clip.provenance.summary
     assert s["level"] == "half time" and s["subdivide"] == 0.5
     assert s["in_range_expected"] == pytest.approx(fits[0.5].share) and fits[0.5].share > 2 * fits[1].share
-    rates = clip.meta["warp_rates"]
+    rates = clip.provenance.warp_rates
     assert rates.max() < 1.5 and in_range(rates) > 0.4
-    grid, beats = clip.meta["grid_times_s"], music.beat_times_s
+    grid, beats = clip.provenance.grid_times_s, music.beat_times_s
     inside = grid[(grid >= beats[0]) & (grid <= beats[-1])]
     assert np.all(np.isin(inside, beats)) and len(inside) >= len(beats) // 2  # every second music beat
 
@@ -161,18 +161,18 @@ def test_default_choice_on_bundled_songs_keeps_pieces_in_range(songs, bundled_db
 @pytest.mark.parametrize("song", [FISHIN.name, "Kevin_MacLeod_-_P_I_Tchaikovsky_Dance_of_the_Sugar_Plum_Fairy.ogg"])
 def test_default_dance_plays_ninety_percent_of_pieces_in_range(songs, bundled_db, song):
     clip = dance(songs[song], database=bundled_db)
-    assert clip.meta["summary"]["in_range_expected"] >= TARGET_SHARE
-    assert in_range(clip.meta["warp_rates"]) >= TARGET_SHARE
+    assert clip.provenance.summary["in_range_expected"] >= TARGET_SHARE
+    assert in_range(clip.provenance.warp_rates) >= TARGET_SHARE
 
 
 def test_slow_click_track_is_danced_in_double_time(tmp_path, bundled_db):
     y, beats = click_track(60.0, 20.0)
     clip = dance(write(tmp_path / "slow.wav", y, SR), database=bundled_db)
-    s = clip.meta["summary"]
+    s = clip.provenance.summary
     assert s["tempo_bpm"] == pytest.approx(60.0, rel=0.02)
     assert s["level"] == "double time" and s["subdivide"] == 2 and not s["warnings"]
-    grid = clip.meta["grid_times_s"]
-    assert np.all(np.min(np.abs(clip.meta["music_beat_times_s"][:, None] - grid[None, :]), axis=1) < 1e-9)
+    grid = clip.provenance.grid_times_s
+    assert np.all(np.min(np.abs(clip.provenance.music_beat_times_s[:, None] - grid[None, :]), axis=1) < 1e-9)
     assert style_fits(bundled_db, np.full(16, 1.0))[0].subdivide == 2
     assert choose_style(bundled_db, 60.0)[1] == 2  # the steady-tempo chooser the live runtime uses
 
@@ -180,9 +180,9 @@ def test_slow_click_track_is_danced_in_double_time(tmp_path, bundled_db):
 def test_music_far_faster_than_every_style_is_danced_at_half_time(bundled_db):
     # (A click track this fast is heard at half its tempo by the beat tracker: given beats here.)
     clip = dance(steady(30.0, 250.0), database=bundled_db)
-    s = clip.meta["summary"]
+    s = clip.provenance.summary
     assert s["level"] == "half time" and s["in_range_expected"] >= TARGET_SHARE
-    assert in_range(clip.meta["warp_rates"]) > 0.6
+    assert in_range(clip.provenance.warp_rates) > 0.6
     assert choose_style(bundled_db, 250.0)[1] in (1, 2)  # the live runtime cannot dance half time
 
 
@@ -192,15 +192,15 @@ def test_a_mix_changes_level_where_its_tempo_changes(tmp_path, bundled_db):
     y2, _ = click_track(130.0, 40.0, offset_s=0.0)
     music = analyse(write(tmp_path / "mix.wav", np.concatenate([y1, y2]), SR))
     clip = dance(music, database=bundled_db)
-    s = clip.meta["summary"]
+    s = clip.provenance.summary
     assert [x["level"] for x in s["sections"]] == ["double time", "beat"] and s["level"] == "double time, then beat"
     assert s["sections"][1]["start_s"] == pytest.approx(40.0, abs=3.0)
     single = max(f.share for f in style_fits(bundled_db, np.diff(music.beat_times_s), sections=False))
     assert s["in_range_expected"] >= TARGET_SHARE > single
-    rates = clip.meta["warp_rates"]
+    rates = clip.provenance.warp_rates
     assert in_range(rates) > 0.75 and rates.max() < 2.0
     again = beat_grid(music, subdivide=s["subdivide"])  # the summary's subdivide rebuilds the grid (bench replays)
-    np.testing.assert_allclose(again.times_s, clip.meta["grid_times_s"])
+    np.testing.assert_allclose(again.times_s, clip.provenance.grid_times_s)
 
 
 # --- the summary and the command line ----------------------------------------------------------
@@ -209,12 +209,12 @@ def test_a_mix_changes_level_where_its_tempo_changes(tmp_path, bundled_db):
 @pytest.mark.parametrize("engine", ["streaming", "global", "choreography"])
 def test_summary_says_style_level_and_warp(engine, bundled_db):
     clip = dance(steady(20.0, 112.5), database=bundled_db, engine=engine)
-    s = clip.meta["summary"]
+    s = clip.provenance.summary
     for key in SUMMARY_KEYS:
         assert key in s, key
     assert s["level"] == "beat" and s["rate_range"] == list(RATE_RANGE)
     assert 0.0 <= s["in_range_expected"] <= 1.0
-    assert s["in_range_actual"] == pytest.approx(in_range(clip.meta["warp_rates"]))
+    assert s["in_range_actual"] == pytest.approx(in_range(clip.provenance.warp_rates))
     assert s["sections"] == [{"start_s": 0.0, "level": "beat", "subdivide": 1}]
     json.dumps({k: s[k] for k in SUMMARY_KEYS + ("subdivide", "typical_rate")})
 

@@ -4,11 +4,11 @@
     >>> clip = dancesynth.dance("song.ogg", style="salsa")
     >>> dancesynth.write_bvh("song.bvh", clip)
 
-Heavy dependencies (librosa) load on first use, so ``import dancesynth`` stays light.
+Everything but the errors loads on first use (numpy included), so ``import dancesynth``
+stays light and the command line can start quietly even when interrupted at once.
 """
 
 from .errors import DanceSynthError, InputError, ModelError, SynthesisError
-from .types import MotionClip, MusicFeatures, Skeleton
 
 __version__ = "0.1.0"
 
@@ -18,6 +18,9 @@ __all__ = ["dance", "list_styles", "read_bvh", "write_bvh", "analyze_music", "op
 
 
 def __getattr__(name):
+    if name in ("MotionClip", "MusicFeatures", "Skeleton"):
+        from . import types
+        return getattr(types, name)
     if name in ("dance", "list_styles", "DanceConfig"):
         from . import api
         return getattr(api, name)

@@ -15,10 +15,10 @@ from .engines.graph.engine import EngineConfig, GraphEngine, MusicSegment, Segme
 from .engines.graph.meta_graph import GraphConfig
 from .errors import InputError
 from .motion.database import MotionDatabase, open_database
-from .types import MotionClip, MusicFeatures, check_seed
+from .provenance import EngineRun, make_provenance
+from .types import DEFAULT_FPS, FALLBACK_BPM, MAX_SONG_S, SEGMENT_S, MotionClip, MusicFeatures, check_seed
 
 ENGINES = ("streaming", "global", "neural", "choreography")
-FALLBACK_BPM = 100.0  # the tempo we dance at when the music has no clear beat
 
 
 @dataclass(frozen=True)
@@ -27,12 +27,12 @@ class DanceConfig:
 
     style: str | None = None
     engine: str | None = None   # None: "choreography" when motif_at or recreate is given, else "streaming"
-    segment_s: float = 5.0
+    segment_s: float = SEGMENT_S
     lookahead_s: float = 0.0            # streaming: each segment's search also sees this much of the music after
                                         # it (a file's music is known): closer to its loudness, feet slide more
-    fps: float = 30.0
+    fps: float = DEFAULT_FPS
     seed: int | None = None
-    max_duration_s: float = 15 * 60.0
+    max_duration_s: float = MAX_SONG_S
     graph: GraphConfig = field(default_factory=GraphConfig)
     render: EngineConfig = field(default_factory=EngineConfig)
     motif_at: tuple = ()                # choreography: ("12.0=M17", ...) or ((12.0, 17), ...); see docs/choreography.md
@@ -122,7 +122,7 @@ def synthesise(engine: GraphEngine, grid: BeatGrid, duration_s: float, config: D
                  "boundaries_s": grid.times_s[[e for _, e in bounds[:-1]]]}
 
 
-def analyse(song, max_duration_s: float = 15 * 60.0) -> MusicFeatures:
+def analyse(song, max_duration_s: float = MAX_SONG_S) -> MusicFeatures:
     from .music import analyze_music  # librosa is heavy: import on first use
 
     return analyze_music(path=song, fallback_bpm=FALLBACK_BPM, max_duration_s=max_duration_s)
@@ -133,8 +133,8 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
     """Make a dance for ``song`` (a path to an audio file, or ``MusicFeatures``).
 
     Keyword overrides are ``DanceConfig`` fields, e.g. ``dance("song.ogg", style="salsa")``.
-    Returns a ``MotionClip`` on the chosen style's skeleton; ``clip.meta["summary"]``
-    says what was done (tempo, beats, style, segments, time per stage).
+    Returns a ``MotionClip`` on the chosen style's skeleton; ``clip.provenance`` records
+    how it was made (``.summary``: tempo, beats, style, segments, time per stage).
     """
     if config is None:
         config = DanceConfig(**overrides)
@@ -152,19 +152,29 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
         from .engines.neural.engine import neural_dance
 
         timings["database_s"] = time.perf_counter() - t
-        clip = neural_dance(music, db, config, song=name, timings=timings)
+        clip, run = neural_dance(music, db, config, timings=timings)
     elif config.engine == "choreography":  # motifs by eq. (5), danced with mocap words (Aristidou et al. §5.2)
         from .engines.choreography import choreography_dance
+        from .motion.motifs import load_motif_model
 
+        reference = None
+        if config.recreate is not None:
+            from .io.bvh import read_bvh
+
+            reference = read_bvh(config.recreate)
+        model = load_motif_model(db)
         timings["database_s"] = time.perf_counter() - t
-        clip = choreography_dance(music, db, config, timings=timings, song=name)
+        clip, run = choreography_dance(music, db, config, timings=timings, motif_model=model, reference=reference)
     else:
-        clip = _graph_dance(music, db, config, name, timings, t, progress)
-    clip.meta["summary"].update(metre_summary(clip, music, clip.meta["summary"].get("warnings", [])))
+        clip, run, timings = _graph_dance(music, db, config, timings, t, progress)
+    segment_s = config.segment_s if config.engine in ("streaming", "global") else None
+    prov = make_provenance(config.engine, name, config, run, fps=config.fps, frames=clip.n_frames, timings=timings,
+                           music=music, segment_s=segment_s)
+    clip.provenance = prov.with_summary(**metre_summary(clip, music, run.style, prov.summary.get("warnings", [])))
     return clip
 
 
-def metre_summary(clip: MotionClip, music: MusicFeatures, warnings: list) -> dict:
+def metre_summary(clip: MotionClip, music: MusicFeatures, style: str, warnings: list) -> dict:
     """What the dance made of the metre: the period (in beats) at which its energy per beat repeats,
     and a warning where a song in three is not danced in three (the style's moves repeat in twos and
     fours)."""
@@ -175,7 +185,7 @@ def metre_summary(clip: MotionClip, music: MusicFeatures, warnings: list) -> dic
     if music.beats_per_bar == 3 and period is not None and period != 3:
         out["warnings"] = list(warnings) + [
             f"the song is in 3/4, but the dance's energy repeats every {period} beats, not in three: the "
-            f"'{clip.meta['summary'].get('style')}' moves found for it do not follow a waltz's bars, nor did "
+            f"'{style}' moves found for it do not follow a waltz's bars, nor did "
             f"those of any other style that fits this tempo as well"]
     return out
 
@@ -204,8 +214,8 @@ def dances_in_three(clip: MotionClip, music: MusicFeatures) -> bool:
     return period == 3 and (not others or strength[3] >= max(others) + IN_THREE_MARGIN)
 
 
-def _graph_dance(music: MusicFeatures, db: MotionDatabase, config: DanceConfig, name: str, timings: dict,
-                 t: float, progress: Progress | None) -> MotionClip:
+def _graph_dance(music: MusicFeatures, db: MotionDatabase, config: DanceConfig, timings: dict,
+                 t: float, progress: Progress | None) -> tuple[MotionClip, EngineRun, dict]:
     """``dance`` for the meta-motion-graph engines (streaming, its signature variant, global).
 
     The style and metrical level are those that warp the beat pieces least (engines/beatgrid.py).
@@ -218,22 +228,23 @@ def _graph_dance(music: MusicFeatures, db: MotionDatabase, config: DanceConfig, 
     waltz = music.beats_per_bar == 3 and music.n_beats >= 4
     fits = fit_styles(db, music, config.style, min_share=METRE_SHARE if waltz else None)
     timings["database_s"] = time.perf_counter() - t
-    clip = _graph_dance_fit(fits[0], music, db, config, name, timings, progress)
+    clip, run = _graph_dance_fit(fits[0], music, db, config, timings, progress)
     tried = [fits[0].style.name]
     if waltz and not dances_in_three(clip, music):
         for fit in fits[1:]:
-            other = _graph_dance_fit(fit, music, db, config, name, dict(timings), progress)
+            other_timings = dict(timings)
+            other, other_run = _graph_dance_fit(fit, music, db, config, other_timings, progress)
             tried.append(fit.style.name)
             if dances_in_three(other, music):
-                clip = other
+                clip, run, timings = other, other_run, other_timings
                 break
     if len(tried) > 1:
-        clip.meta["summary"]["styles_tried_for_metre"] = tried
-    return clip
+        run = replace(run, extra={**run.extra, "styles_tried_for_metre": tried})
+    return clip, run, timings
 
 
-def _graph_dance_fit(fit: StyleFit, music: MusicFeatures, db: MotionDatabase, config: DanceConfig, name: str,
-                     timings: dict, progress: Progress | None) -> MotionClip:
+def _graph_dance_fit(fit: StyleFit, music: MusicFeatures, db: MotionDatabase, config: DanceConfig,
+                     timings: dict, progress: Progress | None) -> tuple[MotionClip, EngineRun]:
     """``_graph_dance`` in one chosen style and metrical level."""
     style, subdivide = fit.style, fit.subdivide
     t = time.perf_counter()
@@ -258,38 +269,25 @@ def _graph_dance_fit(fit: StyleFit, music: MusicFeatures, db: MotionDatabase, co
     # The beat grid starts before 0 s so that a piece covers the first frame; a jump
     # before the first frame is never seen.
     jumps = jumps[(jumps >= 0.0) & (jumps < music.duration_s)]
-    summary = {
-        "song": name,
-        "duration_s": music.duration_s, "tempo_bpm": music.tempo_bpm, "beats": music.n_beats,
-        "beat_confidence": music.beat_confidence, "default_tempo": music.default_tempo,
-        "style": style.name, "subdivide": subdivide, "engine": config.engine,
-        "segments": stats["segments"], "segment_s": config.segment_s, "lookahead_s": config.lookahead_s,
-        "transitions": int(len(jumps)),
-        "graph_nodes": graph.n_nodes, "graph_mean_in_degree": graph.mean_in_degree, "graph_cached": cached,
-        "frames": len(local), "fps": config.fps, "timings_s": timings,
-        "step_s_median": float(np.median(stats["step_s"])), "step_s_max": float(np.max(stats["step_s"])),
-    }
-    meta = {
-        "summary": summary,
-        "music_beat_times_s": music.beat_times_s,
-        "grid_times_s": grid.times_s,
-        "transition_times_s": jumps,
-        "segment_times_s": stats["boundaries_s"],
-        "source_frames": np.concatenate([s.source_pos for s in segments]),
-        "warp_rates": np.concatenate([s.warp_rates(style.fps) for s in segments]),
-        "style": style.name,
-    }
-    summary.update(fit_summary(fit, music, meta["warp_rates"]))  # level, expected/actual warp, warnings
+    warp_rates = np.concatenate([s.warp_rates(style.fps) for s in segments])
+    extra = {"lookahead_s": config.lookahead_s, "graph_nodes": graph.n_nodes,
+             "graph_mean_in_degree": graph.mean_in_degree, "graph_cached": cached}
+    motifs = {}
     if signature is not None:
         from .motion.motifs import chi2
 
         ids = np.concatenate([s.motifs for s in segments])
         danced = ids[ids >= 0]
-        summary.update(genre=signature.genre, motifs=len(signature.template), constraints=0, recreate=None,
-                       motif_chi2=chi2(signature.template, np.bincount(danced, minlength=len(signature.template)))
-                       if danced.size else None)
-        meta["motif_ids"] = ids
-    return MotionClip(style.skeleton, config.fps, root, local, contacts=contacts, meta=meta)
+        extra.update(genre=signature.genre, motifs=len(signature.template), constraints=0, recreate=None,
+                     motif_chi2=chi2(signature.template, np.bincount(danced, minlength=len(signature.template)))
+                     if danced.size else None)
+        motifs = {"motif_ids": ids}
+    run = EngineRun(style=style.name, genre=style.genre, style_fingerprint=style.fingerprint, subdivide=subdivide,
+                    grid_times_s=grid.times_s, transition_times_s=jumps, warp_rates=warp_rates,
+                    segment_times_s=stats["boundaries_s"], step_s=tuple(stats["step_s"]),
+                    source_frames=np.concatenate([s.source_pos for s in segments]), motifs=motifs,
+                    fit=fit_summary(fit, music, warp_rates), extra=extra)
+    return MotionClip(style.skeleton, config.fps, root, local, contacts=contacts), run
 
 
 def list_styles(database: MotionDatabase | str | Path | None = None) -> list[dict]:
@@ -302,24 +300,30 @@ def list_styles(database: MotionDatabase | str | Path | None = None) -> list[dic
 
 
 def conduct(song, *, config=None, melody_track: int | None = None, rhythm_track: int | None = None,
-            skeleton=None, max_duration_s: float = 15 * 60.0) -> MotionClip:
+            skeleton=None, database: MotionDatabase | str | Path | None = None,
+            max_duration_s: float = MAX_SONG_S) -> MotionClip:
     """Upper-body motion interpreting ``song``'s melody (Loi & Li): a MIDI file, an audio file or a
     ``NoteSequence``. ``config`` is a ``ProceduralConfig`` (default look when ``None``).
 
-    Returns a ``MotionClip`` on the default skeleton (the bundled ``mj`` style's) unless
-    ``skeleton`` is given; ``clip.meta["summary"]`` says what was done.
+    Returns a ``MotionClip`` on ``skeleton``, else the database's ``mj`` style's (the bundled
+    database by default); ``clip.provenance`` says what was done.
     """
-    from .engines.procedural import conduct_notes
+    from .engines.procedural import ProceduralConfig, conduct_notes, default_skeleton
     from .music.melody import read_notes
     from .music.notes import NoteSequence
 
+    config = config or ProceduralConfig()
     t = time.perf_counter()
     notes = song if isinstance(song, NoteSequence) else read_notes(
         song, melody_track=melody_track, rhythm_track=rhythm_track, max_duration_s=max_duration_s)
-    notes_s = time.perf_counter() - t
+    timings = {"notes_s": time.perf_counter() - t}
+    if skeleton is None:
+        skeleton = default_skeleton(database if isinstance(database, MotionDatabase) else open_database(database))
     clip = conduct_notes(notes, config, skeleton=skeleton)
-    clip.meta["summary"]["timings_s"]["notes_s"] = notes_s
-    clip.meta["summary"]["song"] = notes.source
-    clip.meta["summary"]["input"] = notes.meta.get("kind", "notes")
-    clip.meta["notes_meta"] = notes.meta
+    stats = dict(clip.meta["stats"])
+    timings.update(stats.pop("timings_s"))
+    run = EngineRun(style="", segment_times_s=clip.meta["segment_times_s"],
+                    extra={**stats, "input": notes.meta.get("kind", "notes")})
+    clip.provenance = make_provenance("procedural", notes.source, config, run, fps=config.fps, frames=clip.n_frames,
+                                      timings=timings, duration_s=notes.duration_s, tempo_bpm=notes.tempo_bpm)
     return clip

@@ -13,6 +13,7 @@ import click
 from .cli_live import render, serve, stream
 from .cli_support import Progress, bvh_output, writable, write_json
 from .errors import DanceSynthError, InputError
+from .types import DEFAULT_FPS, MAX_SONG_S, SEGMENT_S
 
 
 def _setup_env() -> None:
@@ -55,20 +56,22 @@ def cli():
               help="Dance MOTIF (e.g. M17) on the beat at SECONDS; repeatable (implies --engine choreography).")
 @click.option("--follow-signature", is_flag=True,
               help="Streaming engine: also keep the genre's motif signature (Aristidou et al.'s global structure).")
-@click.option("--segment-seconds", type=float, default=5.0, show_default=True, help="Streaming segment length.")
+@click.option("--segment-seconds", type=float, default=SEGMENT_S, show_default=True, help="Streaming segment length.")
 @click.option("--lookahead", "lookahead", type=float, default=0.0, show_default=True, metavar="SECONDS",
               help="Streaming: choose each segment seeing this much of the music after it; the dance follows the "
                    "music's loudness more closely, its feet slide a little more (docs/accents.md).")
-@click.option("--fps", type=float, default=30.0, show_default=True, help="Frame rate of the output.")
+@click.option("--fps", type=float, default=DEFAULT_FPS, show_default=True, help="Frame rate of the output.")
 @click.option("--seed", type=int, default=None,
               help="Vary the dance between runs (default: deterministic).")
 @click.option("--database", type=click.Path(file_okay=False, path_type=Path),
               help="A database folder or a folder of BVH files (default: the bundled database).")
-@click.option("--max-minutes", type=float, default=15.0, show_default=True, help="Refuse longer songs.")
+@click.option("--max-minutes", type=float, default=MAX_SONG_S / 60, show_default=True, help="Refuse longer songs.")
 @click.option("--ths", type=float, default=None, help="Eq. (1) threshold for transitions (default 3.0).")
 @click.option("--thr", type=float, default=None, help="Eq. (2) floor of a transition's weight, > 1 (default 1.5).")
 @click.option("--paper", is_flag=True,
-              help="Xu et al.'s objective exactly: no repeat penalty, jump cost or jump limits, literal eq. (1).")
+              help="Xu et al.'s graph and objective as printed: no repeat penalty, jump cost, jump limits or "
+                   "accent costs, literal eq. (1). Still on: style and level choice, glitch skipping, blends "
+                   "and foot lock (README: 'Where we depart from or add to the paper').")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Also write a JSON report (beats, transitions, time warps) for 'dancesynth eval --report'.")
 @click.option("-q", "--quiet", is_flag=True, help="No summary and no progress bar.")
@@ -103,23 +106,19 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
     finally:
         progress.close()
     t = time.perf_counter()
-    report = None
-    if report_path is not None:
-        from .eval.report import dance_report
-
-        report = dance_report(clip)
+    report = clip.provenance.report() if report_path is not None else None
     # The BVH and the report both or neither: a report that cannot be written leaves no dance behind.
     with atomic_output(output, "w", encoding="utf-8", newline="\n") as fh:
         fh.write(format_bvh(clip))
         if report is not None:
             write_json(report_path, report)
-    s = clip.meta["summary"]
-    s["timings_s"]["write_s"] = time.perf_counter() - t
+    s = clip.provenance.summary
+    write_s = time.perf_counter() - t
     for warning in s.get("warnings", ()):  # also with --quiet: the dance is not what the user may expect
         click.echo(f"warning: {warning}", err=True)
     if quiet:
         return
-    tm = s["timings_s"]
+    tm = {**s["timings_s"], "write_s": write_s}
     note = " (no clear beat: dancing at a steady default tempo)" if s["default_tempo"] else ""
     click.echo(f"song      {song}  {s['duration_s']:.1f} s")
     click.echo(f"tempo     {s['tempo_bpm']:.1f} bpm, {s['beats']} beats{note}")
@@ -397,7 +396,7 @@ def train(style, config_name, device, minutes, out_dir, seed, database, quiet):
 @click.option("--config", "config_path", type=click.Path(dir_okay=False, path_type=Path),
               help="TOML file of parameters (style = \"calm\", l1 = 0.3, ...); see docs/procedural.md.")
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE", help="Override one parameter (repeatable).")
-@click.option("--fps", type=float, default=None, help="Frame rate of the output (default 30).")
+@click.option("--fps", type=float, default=None, help=f"Frame rate of the output (default {DEFAULT_FPS:g}).")
 @click.option("--list-tracks", is_flag=True, help="List the MIDI parts and the ones chosen, then stop.")
 @click.option("-q", "--quiet", is_flag=True, help="No summary.")
 def conduct(song, output, melody_track, rhythm_track, style, config_path, params, fps, list_tracks, quiet):
@@ -414,7 +413,7 @@ def conduct(song, output, melody_track, rhythm_track, style, config_path, params
     cfg = make_config(style=style, config_path=config_path, params=params, fps=fps)
     write_bvh(output, clip := make_motion(song, config=cfg, melody_track=melody_track, rhythm_track=rhythm_track))
     if not quiet:
-        click.echo("\n".join(summary_lines(clip.meta["summary"], output)))
+        click.echo("\n".join(summary_lines(clip.provenance.summary, output)))
 
 
 for _command in (stream, render, serve):  # live and viewing commands, in cli_live.py
@@ -422,8 +421,8 @@ for _command in (stream, render, serve):  # live and viewing commands, in cli_li
 
 
 def main(argv=None) -> int:
-    _setup_env()
     try:
+        _setup_env()
         cli.main(args=argv, prog_name="dancesynth", standalone_mode=False)
     except click.exceptions.Abort:
         click.echo("interrupted", err=True)

@@ -18,6 +18,12 @@ from .errors import InputError
 ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
 MAX_SEED = 2**63 - 1
 
+# Product-wide defaults, each defined here once; the configs and the CLI read them from here.
+DEFAULT_FPS = 30.0          # frame rate of a dance
+SEGMENT_S = 5.0             # streaming segment length (Xu et al. synthesise segment by segment)
+FALLBACK_BPM = 100.0        # the tempo we dance at when the music has no clear beat
+MAX_SONG_S = 15 * 60.0      # longer songs are refused unless the user raises the limit
+
 
 def check_seed(seed) -> None:
     """A dance's seed is None or a whole number 0 .. 2^63 - 1 (numpy's generators take no negatives)."""
@@ -83,7 +89,9 @@ class MotionClip:
     ``local_pos`` is only present when joints other than the root carry animated
     position channels; otherwise each joint sits at its skeleton offset.
     ``contacts`` marks frames where the (left, right) foot is planted.
-    ``meta`` carries provenance: source clips, beat frames, transitions.
+    ``meta`` carries what the source says about the clip (a capture's name, source file and
+    beat frames; a procedural dance's plan); a dance's ``provenance`` records how it was made
+    (``dancesynth.provenance``).
     """
 
     skeleton: Skeleton
@@ -93,6 +101,7 @@ class MotionClip:
     local_pos: np.ndarray | None = None
     contacts: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
+    provenance: object = None   # a dancesynth.provenance.Provenance for a dance dancesynth made
 
     def __post_init__(self):
         self.root_pos = np.asarray(self.root_pos, dtype=np.float64)

@@ -29,7 +29,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..motion.database import MotionDatabase, Style
-from ..types import MusicFeatures
+from ..types import FALLBACK_BPM, MusicFeatures
 from ..errors import InputError
 
 RATE_RANGE = (0.8, 1.25)   # playback rates (captured seconds per music second) that still look natural
@@ -385,7 +385,7 @@ def choose_style(db: MotionDatabase, tempo_bpm: float, name: str | None = None, 
     Only the beat and double time by default: callers that cannot dance half time (the
     live runtime dances the beat it hears) keep getting a style that fits the beat.
     """
-    period = 60.0 / tempo_bpm if tempo_bpm > 0 else 60.0 / 100.0
+    period = 60.0 / (tempo_bpm if tempo_bpm > 0 else FALLBACK_BPM)
     fit = style_fits(db, np.full(64, period), name, levels=levels, sections=False)[0]
     return fit.style, fit.subdivide
 

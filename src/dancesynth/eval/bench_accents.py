@@ -99,20 +99,20 @@ def _score(clip, song: dict, reference, style, source_clips: list) -> dict:
     from .artefacts import feet_vs_source, new_steps
     from .evaluate import evaluate
 
-    jumps = np.asarray(clip.meta.get("transition_times_s", []), dtype=float)
+    jumps = np.asarray(clip.provenance.transition_times_s, dtype=float)
     jumps = jumps[(jumps >= 0) & (jumps <= clip.duration_s)]
-    rates = np.asarray(clip.meta["warp_rates"], dtype=float)
+    rates = np.asarray(clip.provenance.warp_rates, dtype=float)
     r = evaluate(clip, music_beats_s=song["beats"], music_loudness_db=song["loudness"],
                  beat_in_bar=song["beat_in_bar"], beats_per_bar=song["beats_per_bar"], transitions_s=jumps,
                  warp_rates=rates, mocap=reference)
     r["warp_in_range"] = float(np.mean((rates >= 0.8) & (rates <= 1.25))) if rates.size else None
     # Snaps the mocap itself does not make at the frames shown (a capture glitch is the source's own),
     # counting every jump between pieces as a place the source cannot explain.
-    shown, _, _ = sample_frames(style.local_rot, style.root_pos, np.asarray(clip.meta["source_frames"]))
+    shown, _, _ = sample_frames(style.local_rot, style.root_pos, np.asarray(clip.provenance.source_frames))
     cut = np.round(jumps * clip.fps).astype(np.int64)
     r["one_frame_steps"] = int(len(new_steps(clip, shown, cuts=np.r_[cut - 1, cut])))
     # What rendering adds to the feet, apart from which pieces were picked.
-    feet = feet_vs_source(clip, clip.meta["source_frames"], source_clips, style.clip_starts)
+    feet = feet_vs_source(clip, clip.provenance.source_frames, source_clips, style.clip_starts)
     r.update(foot_skate_vs_source=feet["foot_skate_vs_source"], pfc_vs_source=feet["pfc_vs_source"],
              source_share=feet["share"])
     return r
@@ -130,7 +130,7 @@ def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
             progress(f"accents: song {i + 1}/{len(songs)}: {song['name']}")
         scores, styles = {}, {}
         for name, clip in engine_dances(song["music"], db, cfg.seed, cfg.accent_engines, style=None).items():
-            key = (clip.meta["style"], clip.fps)
+            key = (clip.provenance.style, clip.fps)
             if key not in refs:
                 clips_by_style[key] = [at_fps(db.styles[key[0]].clip(c), clip.fps)
                                        for c in range(db.styles[key[0]].n_clips)]
@@ -139,7 +139,7 @@ def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
             if st.name not in sources:
                 sources[st.name] = [st.clip(c) for c in range(st.n_clips)]
             scores[name] = _score(clip, song, refs[key], st, sources[st.name])
-            styles[name] = clip.meta["style"]
+            styles[name] = clip.provenance.style
         per_song.append({"song": song["name"], "set": song["set"], "tempo_bpm": song["music"].tempo_bpm,
                          "beats_per_bar": song["beats_per_bar"], "styles": styles, "scores": scores})
     mocap = {}

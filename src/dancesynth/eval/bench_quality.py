@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .bench_common import MUSIC_DIR, BenchConfig, Progress, load_song, table
+from ..provenance import EngineRun, make_provenance
 from ..types import MotionClip, MusicFeatures
 
 ROWS = ("streaming", "global", "random_walk", "mocap")
@@ -50,29 +51,29 @@ def walk_dance(style, music: MusicFeatures, *, subdivide: int = 1, seed: int = 0
     graph, _ = load_graph(style)
     grid = beat_grid(music, subdivide=subdivide)
     engine = RandomWalkEngine(style, graph, fps=fps)
-    segments, stats = synthesise(engine, grid, music.duration_s, DanceConfig(segment_s=segment_s, fps=fps, seed=seed))
+    config = DanceConfig(segment_s=segment_s, fps=fps, seed=seed)
+    segments, stats = synthesise(engine, grid, music.duration_s, config)
     dead_end = OutSteps.of(graph).count == 0  # where the walk restarted
-    meta = {
-        "music_beat_times_s": music.beat_times_s,
-        "grid_times_s": grid.times_s,
-        "transition_times_s": np.concatenate([s.pieces.t0[s.pieces.jump] for s in segments]),
-        "segment_times_s": stats["boundaries_s"],
-        "source_frames": np.concatenate([s.source_pos for s in segments]),
-        "warp_rates": np.concatenate([s.warp_rates(style.fps) for s in segments]),
-        "style": style.name,
-        "summary": {"engine": "random_walk", "seed": seed, "segments": stats["segments"],
-                    "restarts": int(sum(np.sum(dead_end[s.path.nodes[:-1]]) for s in segments))},
-    }
-    return MotionClip(style.skeleton, fps, np.concatenate([s.root_pos for s in segments]),
+    run = EngineRun(style=style.name, genre=style.genre, style_fingerprint=style.fingerprint, subdivide=subdivide,
+                    grid_times_s=grid.times_s,
+                    transition_times_s=np.concatenate([s.pieces.t0[s.pieces.jump] for s in segments]),
+                    warp_rates=np.concatenate([s.warp_rates(style.fps) for s in segments]),
+                    segment_times_s=stats["boundaries_s"], step_s=tuple(stats["step_s"]),
+                    source_frames=np.concatenate([s.source_pos for s in segments]),
+                    extra={"restarts": int(sum(np.sum(dead_end[s.path.nodes[:-1]]) for s in segments))})
+    clip = MotionClip(style.skeleton, fps, np.concatenate([s.root_pos for s in segments]),
                       np.concatenate([s.local_rot for s in segments]),
-                      contacts=np.concatenate([s.contacts for s in segments]), meta=meta)
+                      contacts=np.concatenate([s.contacts for s in segments]))
+    clip.provenance = make_provenance("random_walk", music.source, config, run, fps=fps, frames=clip.n_frames,
+                                      timings={}, music=music, segment_s=segment_s)
+    return clip
 
 
 def _scores(evaluate, clip: MotionClip, music: MusicFeatures, mocap) -> dict:
-    jumps = np.asarray(clip.meta["transition_times_s"], dtype=float)
+    jumps = np.asarray(clip.provenance.transition_times_s, dtype=float)
     jumps = jumps[(jumps >= 0) & (jumps <= clip.duration_s)]
     return evaluate(clip, music_beats_s=music.beat_times_s, music_loudness_db=music.intensity_db,
-                    transitions_s=jumps, warp_rates=clip.meta["warp_rates"], mocap=mocap)
+                    transitions_s=jumps, warp_rates=clip.provenance.warp_rates, mocap=mocap)
 
 
 def at_fps(clip: MotionClip, fps: float) -> MotionClip:
@@ -132,10 +133,10 @@ def quality(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
         t = time.perf_counter()
         whole = dance(music, database=db, engine="global")
         timings["global_s"] = time.perf_counter() - t
-        style = db.styles[stream.meta["style"]]
+        style = db.styles[stream.provenance.style]
         t = time.perf_counter()
-        walk = walk_dance(style, music, subdivide=stream.meta["summary"]["subdivide"], seed=cfg.seed,
-                          fps=stream.fps, segment_s=stream.meta["summary"]["segment_s"])
+        walk = walk_dance(style, music, subdivide=stream.provenance.summary["subdivide"], seed=cfg.seed,
+                          fps=stream.fps, segment_s=stream.provenance.summary["segment_s"])
         timings["random_walk_s"] = time.perf_counter() - t
         if (style.name, stream.fps) not in clips_by_style:
             clips_by_style[(style.name, stream.fps)] = [at_fps(style.clip(c), stream.fps)
@@ -151,11 +152,11 @@ def quality(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
         scores["mocap"] = mocap_by_style[style.name]["mean"]
         timings["evaluate_s"] = time.perf_counter() - t
         per_song.append({"song": Path(song).name, "duration_s": music.duration_s, "tempo_bpm": music.tempo_bpm,
-                         "style": style.name, "transitions": {n: int(len(c.meta["transition_times_s"]))
+                         "style": style.name, "transitions": {n: int(len(c.provenance.transition_times_s))
                                                                for n, c in (("streaming", stream),
                                                                             ("global", whole),
                                                                             ("random_walk", walk))},
-                         "random_walk_restarts": walk.meta["summary"]["restarts"],
+                         "random_walk_restarts": walk.provenance.summary["restarts"],
                          "scores": scores, "timings_s": timings})
     metrics = list(METRICS)
     mean = {row: mean_scores([s["scores"][row] for s in per_song]) for row in ROWS}

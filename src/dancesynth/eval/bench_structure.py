@@ -76,7 +76,7 @@ def engine_dances(music, db, seed: int, engines, style: str | None = GENRE) -> d
         t = time.perf_counter()
         if name == "random_walk":
             ref = out.get("streaming") or dance(music, database=db, style=style, seed=seed)
-            clip = walk_dance(db.styles[ref.meta["style"]], music, subdivide=ref.meta["summary"]["subdivide"],
+            clip = walk_dance(db.styles[ref.provenance.style], music, subdivide=ref.provenance.summary["subdivide"],
                               seed=seed, fps=ref.fps)
         elif name in kinds:
             clip = dance(music, database=db, style=style, seed=seed, **kinds[name])
@@ -139,14 +139,14 @@ def structure(cfg: BenchConfig, db, progress: Progress | None = None, out_dir: P
             if progress:
                 progress(f"structure: {Path(song).name} ({i + 1}/{len(songs)}), seed {seed}")
             for name, clip in engine_dances(music, db, seed, engines).items():
-                grid = clip.meta["grid_times_s"]
+                grid = clip.provenance.grid_times_s
                 found = found_motifs(clip, model, grid)
-                jumps = np.asarray(clip.meta.get("transition_times_s", np.zeros(0)), dtype=float)
+                jumps = np.asarray(clip.provenance.transition_times_s, dtype=float)
                 scores = evaluate(clip, music_beats_s=music.beat_times_s, music_loudness_db=music.intensity_db,
                                   transitions_s=jumps[(jumps >= 0) & (jumps <= clip.duration_s)],
-                                  warp_rates=clip.meta.get("warp_rates"), mocap=refs[clip.meta["style"]])
-                danced = clip.meta.get("motif_ids")
-                per_dance.append({"song": Path(song).name, "seed": seed, "engine": name, "style": clip.meta["style"],
+                                  warp_rates=clip.provenance.warp_rates, mocap=refs[clip.provenance.style])
+                danced = clip.provenance.motifs.get("motif_ids")
+                per_dance.append({"song": Path(song).name, "seed": seed, "engine": name, "style": clip.provenance.style,
                                   "duration_s": music.duration_s, "words": int(len(found)),
                                   "chi2": _chi2_ids(model, template, found),
                                   "chi2_danced": None if danced is None else _chi2_ids(model, template, danced),
@@ -202,7 +202,7 @@ def fig12(cfg: BenchConfig, db, model, engines, progress, *, out_dir: Path | Non
         if progress:
             progress(f"structure: Fig. 12 on {song}, seed {seed}")
         for name, clip in engine_dances(music, db, seed, [e for e in engines if e in cfg.fig12_engines]).items():
-            grid = clip.meta["grid_times_s"]
+            grid = clip.provenance.grid_times_s
             found = found_motifs(clip, model, grid)
             starts = grid[:len(found)]
             curves.setdefault(name, []).append([_chi2_ids(model, template, found[starts < t]) for t in times])
@@ -256,12 +256,13 @@ def recreation(cfg: BenchConfig, db, model, progress) -> dict:
             ref = Path(tmp) / f"{st.clip_names[c]}.bvh"
             write_bvh(ref, st.clip(c))
             held_out = MotionDatabase({st.name: st.without_clip(c)}, db.source)
-            clip = choreography_dance(music, held_out, DanceConfig(recreate=ref, style=st.name), song=str(ref),
-                                      timings={}, motif_model=model)
-            wanted = np.resize(model.assign(clip_words(read_bvh(ref)).features), len(clip.meta["motif_ids"]))
-            found = found_motifs(clip, model, clip.meta["grid_times_s"])
+            reference = read_bvh(ref)
+            clip, run = choreography_dance(music, held_out, DanceConfig(recreate=ref, style=st.name), timings={},
+                                           motif_model=model, reference=reference)
+            wanted = np.resize(model.assign(clip_words(reference).features), len(run.motifs["motif_ids"]))
+            found = found_motifs(clip, model, run.grid_times_s)
             rows.append({"reference": st.clip_names[c], "beats": int(len(wanted)),
-                         "danced": float(np.mean(clip.meta["motif_ids"] == wanted)),
+                         "danced": float(np.mean(run.motifs["motif_ids"] == wanted)),
                          "found_again": float(np.mean(found == wanted[:len(found)]))})
     return {"style": st.name, "song": cfg.recreate_song, "rows": rows,
             "danced_mean": _mean(r["danced"] for r in rows), "found_again_mean": _mean(r["found_again"] for r in rows),

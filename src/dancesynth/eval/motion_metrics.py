@@ -14,6 +14,7 @@ import numpy as np
 from .. import rotations as rot
 from ..errors import InputError
 from ..kinematics import clip_fk
+from ..motion import beats as motion_beats
 from ..motion.beats import kinematic_beats as motion_kinematic_beats
 from ..motion.beats import summed_speed
 from ..motion.features import CONTACT_HEIGHT_M, foot_points, interval_energy, kinetic_energy
@@ -22,10 +23,10 @@ from ..types import MotionClip
 from .beat_metrics import as_times, as_values, check_seconds
 
 #: Defaults shared with ``evaluate.EvalParams`` (one source).
-DEFAULT_SMOOTH_S = 0.15            # Savitzky-Golay window, as motion.beats.kinematic_beats
-DEFAULT_POLYORDER = 2
-DEFAULT_MIN_SEPARATION_S = 0.1     # a minimum must be the lowest within +-half of this
-DEFAULT_MIN_PROMINENCE_FRAC = 0.05  # of the clip's mean smoothed speed
+DEFAULT_SMOOTH_S = motion_beats.SMOOTH_S    # kinematic beats as the analysis finds them
+DEFAULT_POLYORDER = motion_beats.POLYORDER
+DEFAULT_MIN_SEPARATION_S = motion_beats.MIN_SEPARATION_S
+DEFAULT_MIN_PROMINENCE_FRAC = motion_beats.MIN_PROMINENCE_FRAC
 DEFAULT_TRANSITION_RADIUS_S = 0.035  # +-2 frames at 60 fps, +-1 at 30 fps
 DEFAULT_CONTACT_HEIGHT_M = CONTACT_HEIGHT_M  # motion.features': one contact height everywhere
 EDGE_FPS = 30.0                    # EDGE's PFC measures foot motion per 1/30 s frame

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..types import MotionClip, MusicFeatures
+from ..types import FALLBACK_BPM, MotionClip, MusicFeatures
 from .evaluate import EvalParams, evaluate, mocap_reference
 
 # A dance and its song may differ by this much (fraction of the song, plus 1 s)
@@ -35,20 +35,6 @@ def load_dance_report(path: Path) -> dict:
     return report
 
 
-def dance_report(clip: MotionClip) -> dict:
-    """What ``dance --report`` writes: the dance's provenance that a BVH cannot hold."""
-    meta = clip.meta
-    return {
-        "summary": meta.get("summary", {}),
-        "style": meta.get("style"),
-        "music_beat_times_s": np.asarray(meta.get("music_beat_times_s", []), dtype=float).tolist(),
-        "grid_times_s": np.asarray(meta.get("grid_times_s", []), dtype=float).tolist(),
-        "transition_times_s": np.asarray(meta.get("transition_times_s", []), dtype=float).tolist(),
-        "segment_times_s": np.asarray(meta.get("segment_times_s", []), dtype=float).tolist(),
-        "warp_rates": np.asarray(meta.get("warp_rates", []), dtype=float).tolist(),
-    }
-
-
 def _pick_mocap(dance: MotionClip, music: MusicFeatures, style: str | None, report: dict | None, database):
     """The source mocap to compare with: ``style``, else the report's, else the best match of skeleton and tempo."""
     from ..motion.database import open_database
@@ -62,7 +48,7 @@ def _pick_mocap(dance: MotionClip, music: MusicFeatures, style: str | None, repo
         candidates = [s for s in db.styles.values() if set(s.skeleton.names) == joints]
         if not candidates:
             return None, None
-    tempo = music.tempo_bpm if music.tempo_bpm > 0 else 100.0
+    tempo = music.tempo_bpm if music.tempo_bpm > 0 else FALLBACK_BPM
     best = min(candidates, key=lambda s: abs(np.log2(np.median(s.clip_tempo_bpm) / tempo)))
     return best.name, [best.clip(i) for i in range(best.n_clips)]
 

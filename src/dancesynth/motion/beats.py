@@ -90,8 +90,15 @@ def summed_speed(global_pos: np.ndarray, fps: float) -> np.ndarray:
     return np.linalg.norm(np.gradient(global_pos, axis=0), axis=-1).sum(axis=1) * fps
 
 
-def kinematic_beats(speed: np.ndarray, fps: float, *, smooth_s: float = 0.15, polyorder: int = 2,
-                    min_separation_s: float = 0.1, min_prominence_frac: float = 0.05,
+# Kinematic beats (Aristidou et al. §5.2.1), one set of parameters for analysis and evaluation alike.
+SMOOTH_S = 0.15              # Savitzky-Golay window
+POLYORDER = 2
+MIN_SEPARATION_S = 0.1       # a minimum must be the lowest within +-half of this
+MIN_PROMINENCE_FRAC = 0.05   # of the clip's mean smoothed speed
+
+
+def kinematic_beats(speed: np.ndarray, fps: float, *, smooth_s: float = SMOOTH_S, polyorder: int = POLYORDER,
+                    min_separation_s: float = MIN_SEPARATION_S, min_prominence_frac: float = MIN_PROMINENCE_FRAC,
                     ) -> tuple[np.ndarray, np.ndarray]:
     """Frames of local minima of the Savitzky-Golay-smoothed speed curve, and that curve.
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.audio import DEFAULT_MAX_DURATION_S, DEFAULT_MIN_DURATION_S, load_audio, resample
-from ..types import MusicFeatures
+from ..types import FALLBACK_BPM, MusicFeatures
 from .beats import (DEFAULT_TRACKER, MIN_BEATS, MIN_CONFIDENCE, TRACKERS, beat_onset_db, steady_beat_grid,
                     track_beats)
 from .intensity import beat_intensity_db, rms_db
@@ -27,7 +27,7 @@ SILENCE_PEAK_DB = -60.0
 
 
 def analyze_music(*, path=None, y: np.ndarray | None = None, sr: int | None = None,
-                  fallback_bpm: float = 100.0, tracker: str = DEFAULT_TRACKER,
+                  fallback_bpm: float = FALLBACK_BPM, tracker: str = DEFAULT_TRACKER,
                   min_confidence: float = MIN_CONFIDENCE, silence_db: float = SILENCE_PEAK_DB,
                   max_duration_s: float | None = DEFAULT_MAX_DURATION_S,
                   min_duration_s: float = DEFAULT_MIN_DURATION_S) -> MusicFeatures:

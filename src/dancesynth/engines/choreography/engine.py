@@ -17,12 +17,13 @@ import numpy as np
 
 from ...errors import InputError
 from ...motion.database import MotionDatabase, Style
-from ...motion.motifs import chi2, load_motif_model, parse_motif_id
+from ...motion.motifs import chi2, parse_motif_id
 from ...motion.words import clip_words
+from ...provenance import EngineRun
 from ...types import MotionClip, MusicFeatures
 from ..beatgrid import StyleFit, beat_grid, fit_style, fit_summary
 from .level import constraint_beats, parse_motif_at, plan_motifs, recreate_plan
-from .mixer import Mix, MixerConfig, mix, substitute_motifs, word_bank
+from .mixer import MixerConfig, mix, substitute_motifs, word_bank
 
 _BANKS: dict = {}  # (style, model) -> WordBank: cutting and embedding a style's words takes seconds
 
@@ -47,15 +48,12 @@ class Reference:
     styles: tuple[Style, ...]
 
 
-def reference_motifs(path, model, styles) -> Reference:
-    """Read a reference BVH, check it is on the skeleton of one of ``styles``, cut it into words
-    at its kinematic beats (as ``dancesynth motifs`` does) and assign each word its motif.
+def reference_motifs(clip: MotionClip, path: str, model, styles) -> Reference:
+    """Check a reference dance (read from ``path``) is on the skeleton of one of ``styles``, cut it
+    into words at its kinematic beats (as ``dancesynth motifs`` does) and assign each word its motif.
 
-    ``InputError`` if it is unreadable, on another skeleton, or too short for a word.
+    ``InputError`` if it is on another skeleton or too short for a word.
     """
-    from ...io.bvh import read_bvh
-
-    clip = read_bvh(path)
     names = tuple(clip.skeleton.names)
     same = tuple(s for s in styles if tuple(s.skeleton.names) == names)
     if not same:
@@ -86,17 +84,19 @@ def _check_constraints(fixed: dict, bank, style: Style) -> None:
                          "those or another --style ('dancesynth motifs' shows a dance's motifs)")
 
 
-def choreography_dance(music: MusicFeatures, db: MotionDatabase, config, *, song: str, timings: dict,
-                       motif_model=None, mixer: MixerConfig = MixerConfig()) -> MotionClip:
+def choreography_dance(music: MusicFeatures, db: MotionDatabase, config, *, timings: dict, motif_model,
+                       reference: MotionClip | None = None,
+                       mixer: MixerConfig = MixerConfig()) -> tuple[MotionClip, EngineRun]:
     """``api.dance`` for ``config.engine == "choreography"``.
 
     ``config`` is a ``DanceConfig``: ``motif_at`` (``"12.0=M17"`` strings or ``(seconds,
-    motif)`` pairs) and ``recreate`` (a reference BVH path) are the user's constraints.
+    motif)`` pairs) and ``recreate`` (a reference BVH path, read into ``reference``) are the
+    user's constraints; ``motif_model`` the database's (``motion.motifs.load_motif_model``).
     """
     t = time.perf_counter()
-    model = motif_model if motif_model is not None else load_motif_model(db)
+    model = motif_model
     pool = db.styles_of(config.style) if config.style else list(db.styles.values())
-    ref = reference_motifs(config.recreate, model, pool) if config.recreate else None
+    ref = reference_motifs(reference, str(config.recreate), model, pool) if reference is not None else None
     constraints = [parse_motif_at(c, model.k) if isinstance(c, str)
                    else (float(c[0]), parse_motif_id(str(c[1]), model.k)) for c in config.motif_at]
     fit = _choose(db, music, config.style, ref)
@@ -122,38 +122,20 @@ def choreography_dance(music: MusicFeatures, db: MotionDatabase, config, *, song
                  beat_count=grid.count, bar_position=grid.bar_position, beats_per_bar=grid.beats_per_bar,
                  free=free)
     timings["synthesis_s"] = time.perf_counter() - t
-    clip = _clip(style, music, grid, result, plan, fixed, subdivide, model, song=song, config=config,
-                 timings=timings, ref=ref)
-    clip.meta["summary"].update(fit_summary(fit, music, clip.meta["warp_rates"]))  # level, warp, warnings
-    return clip
-
-
-def _clip(style, music, grid, result: Mix, plan, fixed, subdivide, model, *, song, config, timings, ref):
     p = result.pieces
     jumps = p.t0[p.jump]
     jumps = jumps[(jumps >= 0.0) & (jumps < music.duration_s)]
-    template = model.templates[style.genre]
-    summary = {
-        "song": song, "duration_s": music.duration_s, "tempo_bpm": music.tempo_bpm, "beats": music.n_beats,
-        "beat_confidence": music.beat_confidence, "default_tempo": music.default_tempo,
-        "style": style.name, "genre": style.genre, "subdivide": subdivide, "engine": "choreography", "segments": 1,
-        "segment_s": music.duration_s, "transitions": int(len(jumps)), "graph_cached": True,
-        "frames": len(result.local_rot), "fps": config.fps, "timings_s": timings,
-        "step_s_median": timings["synthesis_s"], "step_s_max": timings["synthesis_s"],
-        "motifs": model.k, "motif_chi2": chi2(template, model.signature(result.motifs)),
-        "plan_followed": float(np.mean(result.motifs == plan)), "constraints": len(fixed),
-        "recreate": None if ref is None else ref.path,
-    }
-    meta = {
-        "summary": summary, "style": style.name,
-        "music_beat_times_s": music.beat_times_s, "grid_times_s": grid.times_s,
-        "transition_times_s": jumps, "segment_times_s": np.zeros(0),
-        "source_frames": result.source_frames,
-        "warp_rates": (p.f1 - p.f0) / (p.t1 - p.t0) / style.fps,
-        "motif_ids": result.motifs, "motif_plan": plan,
-        "motif_constraints": {int(b): int(m) for b, m in fixed.items()},
-        "word_frames": np.stack([p.f0, p.f1], axis=1).astype(np.int64),
-    }
-    return MotionClip(style.skeleton, config.fps, result.root_pos, result.local_rot,
-                      contacts=result.contacts, meta=meta)
-
+    warp_rates = (p.f1 - p.f0) / (p.t1 - p.t0) / style.fps
+    extra = {"graph_cached": True, "motifs": model.k,
+             "motif_chi2": chi2(model.templates[style.genre], model.signature(result.motifs)),
+             "plan_followed": float(np.mean(result.motifs == plan)), "constraints": len(fixed),
+             "recreate": None if ref is None else ref.path}
+    motifs = {"motif_ids": result.motifs, "motif_plan": plan,
+              "motif_constraints": {int(b): int(m) for b, m in fixed.items()},
+              "word_frames": np.stack([p.f0, p.f1], axis=1).astype(np.int64)}
+    run = EngineRun(style=style.name, genre=style.genre, style_fingerprint=style.fingerprint, subdivide=subdivide,
+                    grid_times_s=grid.times_s, transition_times_s=jumps, warp_rates=warp_rates,
+                    step_s=(timings["synthesis_s"],), source_frames=result.source_frames, motifs=motifs,
+                    fit=fit_summary(fit, music, warp_rates), extra=extra)
+    clip = MotionClip(style.skeleton, config.fps, result.root_pos, result.local_rot, contacts=result.contacts)
+    return clip, run

@@ -25,6 +25,7 @@ import numpy as np
 
 from ...motion.database import Style
 from ...motion.roles import find_roles
+from ...types import DEFAULT_FPS
 from ..footlock import FootLockState, lock_feet
 from ..stitch import Pieces, Rendered, StitchState, beat_ease, render
 from .meta_graph import MetaMotionGraph
@@ -167,7 +168,7 @@ class GraphEngine:
     style: Style
     graph: MetaMotionGraph
     config: EngineConfig = EngineConfig()
-    fps: float = 30.0
+    fps: float = DEFAULT_FPS
     signature: SignatureTarget | None = None  # follow a genre's motif signature (signature.py)
 
     def initial_state(self, seed: int | None = None, needed_beats: float = np.inf) -> StreamState:

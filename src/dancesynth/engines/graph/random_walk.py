@@ -25,6 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ...errors import SynthesisError
+from ...types import DEFAULT_FPS
 from ...motion.database import Style
 from ...motion.roles import find_roles
 from ..footlock import FootLockState, lock_feet
@@ -108,7 +109,7 @@ class RandomWalkEngine:
     style: Style
     graph: MetaMotionGraph
     config: EngineConfig = EngineConfig()
-    fps: float = 30.0
+    fps: float = DEFAULT_FPS
 
     def initial_state(self, seed: int | None = None) -> WalkState:
         """Start at a clip's first beat (InitS) drawn by ``seed`` (``None``: seed 0)."""

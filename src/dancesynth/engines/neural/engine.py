@@ -24,6 +24,7 @@ from ...motion.database import MotionDatabase
 from ...motion.features import foot_contacts, foot_points
 from ...motion.resample import sample_frames
 from ...motion.roles import find_roles
+from ...provenance import EngineRun
 from ...types import MotionClip, MusicFeatures
 from ..beatgrid import beat_grid, fit_style, fit_summary
 from ..footlock import FootLockState, lock_feet
@@ -138,7 +139,7 @@ def generate(model: StoredModel, music: MusicFeatures, grid, motifs: np.ndarray,
                             "warp_rates": np.diff(src_s) * fps, "warp_anchors_s": anchors[0]})
 
 
-def neural_dance(music: MusicFeatures, db: MotionDatabase, config, *, song: str, timings: dict) -> MotionClip:
+def neural_dance(music: MusicFeatures, db: MotionDatabase, config, *, timings: dict) -> tuple[MotionClip, EngineRun]:
     """``api.dance`` for ``config.engine == "neural"``: choose style and model, generate, summarise."""
     t = time.perf_counter()
     fit = replace(fit_style(db, music, config.style or DEFAULT_GENRE), forced=config.style is not None)
@@ -154,17 +155,10 @@ def neural_dance(music: MusicFeatures, db: MotionDatabase, config, *, song: str,
     motifs = motif_plan(grid.n_intervals, model.template, model.transitions, np.random.default_rng(seed))
     clip = generate(model, music, grid, motifs, fps=config.fps, seed=seed)
     timings["synthesis_s"] = time.perf_counter() - t
-    clip.meta.update({
-        "summary": {
-            "song": song, "duration_s": music.duration_s, "tempo_bpm": music.tempo_bpm, "beats": music.n_beats,
-            "beat_confidence": music.beat_confidence, "default_tempo": music.default_tempo,
-            "style": style.name, "subdivide": subdivide, "engine": "neural", "segments": 1,
-            "segment_s": music.duration_s, "transitions": 0, "graph_cached": True, "frames": clip.n_frames,
-            "fps": config.fps, "timings_s": timings, "model": str(model.path),
-            "step_s_median": timings["synthesis_s"], "step_s_max": timings["synthesis_s"],
-            "realtime_factor": music.duration_s / max(timings["synthesis_s"], 1e-9)},
-        "music_beat_times_s": music.beat_times_s, "transition_times_s": np.zeros(0),
-        "segment_times_s": np.zeros(0), "style": style.name})
-    # The generator makes its own motion (its warp_rates are per frame): no beat pieces to count.
-    clip.meta["summary"].update(fit_summary(fit, music, None))
-    return clip
+    # The generator makes its own motion (its warp rates are per frame): no beat pieces to count.
+    run = EngineRun(style=style.name, genre=style.genre, style_fingerprint=style.fingerprint, subdivide=subdivide,
+                    grid_times_s=grid.times_s, warp_rates=clip.meta["warp_rates"], step_s=(timings["synthesis_s"],),
+                    motifs={"motif_plan": motifs}, fit=fit_summary(fit, music, None),
+                    extra={"graph_cached": True, "model": str(model.path),
+                           "realtime_factor": music.duration_s / max(timings["synthesis_s"], 1e-9)})
+    return clip, run

@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
 from ...errors import InputError
+from ...types import DEFAULT_FPS
 
 
 @dataclass(frozen=True)
@@ -58,7 +59,7 @@ class ProceduralConfig:
     nod_turn: float = 0.25          # least time between two changes of direction of the head
     sway_turn: float = 0.6          # ... and of the torso
     knee_bend: float = 8.0          # the legs' easy stance
-    fps: float = 30.0
+    fps: float = DEFAULT_FPS
 
     def __post_init__(self):
         for f in fields(self):

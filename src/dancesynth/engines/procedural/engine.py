@@ -32,11 +32,8 @@ TAIL_S = 0.5            # motion after the music ends, so the last gesture can f
 MAX_RESCALES = 4
 
 
-def default_skeleton(database=None) -> Skeleton:
-    """The skeleton of the bundled database's ``mj`` style (or of ``database``'s first style with arms)."""
-    from ...motion.database import MotionDatabase, open_database
-
-    db = database if isinstance(database, MotionDatabase) else open_database(database)
+def default_skeleton(db) -> Skeleton:
+    """The skeleton of the database's ``mj`` style, else of its first style with two arms and a head."""
     if DEFAULT_STYLE in db.styles:
         return db.styles[DEFAULT_STYLE].skeleton
     for name in sorted(db.styles):
@@ -121,12 +118,13 @@ def plan_right_hand(notes: NoteSequence, bounds, cfg: ProceduralConfig):
 
 
 def conduct_notes(notes: NoteSequence, cfg: ProceduralConfig | None = None, *,
-                  skeleton: Skeleton | None = None, segment_method: str = "prefix") -> MotionClip:
-    """Upper-body motion interpreting ``notes`` (a ``MotionClip`` at ``cfg.fps``).
+                  skeleton: Skeleton, segment_method: str = "prefix") -> MotionClip:
+    """Upper-body motion interpreting ``notes`` (a ``MotionClip`` at ``cfg.fps``) on ``skeleton``
+    (``default_skeleton(database)`` is the usual one).
 
     ``clip.meta`` holds the plan: segments, keyframes (times, positions in arm
     lengths from the shoulder, corners), beat-note times, long and staccato notes,
-    and a ``summary`` with sizes and timings.
+    and ``stats``: sizes and timings (``api.conduct`` makes them the dance's provenance).
     """
     cfg = cfg or ProceduralConfig()
     if notes.n_notes < 2:
@@ -140,7 +138,7 @@ def conduct_notes(notes: NoteSequence, cfg: ProceduralConfig | None = None, *,
     timings["plan_s"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    rig = _Rig(skeleton if skeleton is not None else default_skeleton())
+    rig = _Rig(skeleton)
     sk, roles = rig.sk, rig.roles
     end_s = max(notes.duration_s, float(keys.times_s[-1])) + TAIL_S
     n_frames = int(np.ceil(end_s * cfg.fps)) + 1
@@ -184,16 +182,15 @@ def conduct_notes(notes: NoteSequence, cfg: ProceduralConfig | None = None, *,
     timings["pose_s"] = time.perf_counter() - t
 
     v0, v1 = end_speeds(path, cfg)
-    summary = {
+    stats = {
         "notes": notes.n_notes, "segments": len(bounds), "beat_notes": int(notes.is_beat.sum()),
         "long_notes": int(np.sum(notes.duration_16 > cfg.long_note)), "staccato_notes": int(notes.staccato.sum()),
-        "duration_s": notes.duration_s, "tempo_bpm": notes.tempo_bpm, "frames": n_frames, "fps": cfg.fps,
         "rescaled_segments": int(np.sum(keys.y_scale < 1.0)), "path_rescales": rescales,
         "max_hand_speed": float(np.max(np.concatenate([v0, v1]))) if len(v0) else 0.0,
         "timings_s": timings,
     }
     meta = {
-        "summary": summary, "engine": "procedural", "config": config_dict(cfg),
+        "stats": stats, "config": config_dict(cfg),
         "segments": np.asarray(bounds), "segment_times_s": notes.onset_s[[b - 1 for _, b in bounds]],
         "keyframe_times_s": keys.times_s, "keyframes": keys.pos, "corner": keys.corner,
         "beat_note_times_s": notes.onset_s[notes.is_beat], "note_onsets_s": notes.onset_s,
