@@ -70,3 +70,17 @@ def test_intensity_is_standardised_by_everything_heard_so_far(engine):
     # Looked-ahead intervals are searched, not heard: they do not enter the statistics.
     ahead = MusicSegment(seg2.beat_times_s, seg2.intensity_db, ahead=4)
     assert engine.step(state, ahead)[0].n_heard == 16
+
+
+def test_a_report_is_enough_to_make_the_same_dance_again(bundled_db, bundled_song):
+    import json
+
+    from dancesynth.api import analyse, config_from_report, dance
+
+    music = analyse(bundled_song)
+    first = dance(music, database=bundled_db, seed=7, segment_s=4.0, follow_signature=True)
+    report = json.loads(json.dumps(first.provenance.report()))   # as written to disk and read back
+    assert report["config"]["seed"] == 7 and report["style"] == first.provenance.style
+    again = dance(music, database=bundled_db, config=config_from_report(report))
+    np.testing.assert_array_equal(again.local_rot, first.local_rot)
+    np.testing.assert_array_equal(again.root_pos, first.root_pos)

@@ -72,6 +72,24 @@ class DanceConfig:
 Progress = Callable[[str, int, int], None]
 
 
+def config_from_report(report: dict) -> DanceConfig:
+    """The ``DanceConfig`` a dance was made with, from its ``--report`` (``Provenance.report``):
+    with the same song and database, ``dance(song, config=config_from_report(report))`` makes
+    the same dance again."""
+    from .motion.accents import AccentCosts
+
+    try:
+        c = dict(report["config"])
+        render = dict(c.pop("render"))
+        accent = render.pop("accent")
+        graph = GraphConfig(**c.pop("graph"))
+        render = EngineConfig(**render, accent=None if accent is None else AccentCosts(**accent))
+        motif_at = tuple(m if isinstance(m, str) else tuple(m) for m in c.pop("motif_at", ()))
+        return DanceConfig(**c, graph=graph, render=render, motif_at=motif_at)
+    except (KeyError, TypeError, AttributeError) as exc:
+        raise InputError(f"not a report of 'dancesynth dance --report' with its configuration ({exc})") from None
+
+
 def segment_bounds(times_s: np.ndarray, segment_s: float) -> list[tuple[int, int]]:
     """Cut a beat grid into segments of at most ``segment_s`` (at least one interval each)."""
     bounds, b, last = [], 0, len(times_s) - 1
