@@ -79,7 +79,7 @@ class StyleReference:
     def __init__(self, style, fps):
         from dancesynth.eval import motion_metrics as mm
         from dancesynth.eval.artefacts import hand_in_head_frames, one_frame_steps
-        from dancesynth.eval.bench_quality import at_fps
+        from dancesynth.bench.quality import at_fps
         from dancesynth.eval.evaluate import mocap_reference
 
         clips = [at_fps(style.clip(c), fps) for c in range(style.n_clips)]
@@ -174,7 +174,7 @@ def _ratio(a, b):
 
 def run(songs, engines, mix_s, styles=(), progress=print) -> dict:
     from dancesynth.api import dance
-    from dancesynth.eval.bench_common import DEFAULT_SONG, MUSIC_DIR, load_song
+    from dancesynth.bench.common import DEFAULT_SONG, MUSIC_DIR, load_song
     from dancesynth.motion.database import open_database
 
     db = open_database()
@@ -269,7 +269,7 @@ def main(argv=None) -> int:
     ap.add_argument("--before", type=Path, help="a result of this script on older code, kept for comparison")
     args = ap.parse_args(argv)
     sys.path.insert(0, str(args.src))
-    from dancesynth.eval.bench_common import MUSIC_DIR
+    from dancesynth.bench.common import MUSIC_DIR
 
     songs = args.songs or sorted(p.name for p in MUSIC_DIR.glob("*.ogg"))
     result = run(songs, args.engines, args.mix_s, args.styles,

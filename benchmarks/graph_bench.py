@@ -1,4 +1,4 @@
-"""Run the package benchmark (``dancesynth.eval.bench``) and print its tables.
+"""Run the package benchmark (``dancesynth.bench.run``) and print its tables.
 
     python benchmarks/graph_bench.py [--quick] [--out benchmarks/results]
 
@@ -24,7 +24,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results")
     args = ap.parse_args(argv)
     sys.path.insert(0, str(REPO / "src"))
-    from dancesynth.eval.bench import format_bench, run_bench
+    from dancesynth.bench.run import format_bench, run_bench
 
     result = run_bench(quick=args.quick, out_dir=args.out, progress=lambda m: print(m, file=sys.stderr, flush=True))
     print(format_bench(result))

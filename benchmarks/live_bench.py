@@ -85,8 +85,8 @@ def alignment(songs, seeds=range(5), segment_s: float = 5.0, truth: dict | None 
 
 
 def truth_alignment(quick: bool, seeds) -> list[dict]:
-    """``alignment`` on the generated songs with exactly known beats (eval.groundtruth), against those beats."""
-    from dancesynth.eval.groundtruth import ground_truth_set
+    """``alignment`` on the generated songs with exactly known beats (bench.groundtruth), against those beats."""
+    from dancesynth.bench.groundtruth import ground_truth_set
     from dancesynth.motion.database import cache_dir
 
     songs = ground_truth_set(cache_dir() / "groundtruth", quick=quick)

@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/procedural_bench.py [--out benchmarks/results]
 
 1. Segmentation of 250/500/1000/2000-note melodies (the first notes of a long
-   generated song with drums, ``eval.groundtruth``): the prefix DP the engine uses
+   generated song with drums, ``bench.groundtruth``): the prefix DP the engine uses
    and the paper's Fig. 2 table (O(n^3), vectorised); both must find the same cost.
 2. Whole songs, end to end as ``dancesynth conduct`` runs them (reading the notes,
    segmenting, planning, posing, writing the BVH): a 3-minute generated MIDI song
@@ -42,7 +42,7 @@ def bench_segmentation(tmp: Path) -> list[dict]:
     from dancesynth.engines.procedural.config import ProceduralConfig
     from dancesynth.engines.procedural.segment import (segment_costs, segment_fig2, segment_prefix,
                                                         segmentation_cost)
-    from dancesynth.eval import groundtruth as gt
+    from dancesynth.bench import groundtruth as gt
     from dancesynth.music.notes import midi_notes
 
     gt.write_midi(gt.SongSpec("long", (120,), duration_s=700.0, seed=11), tmp / "long.mid")
@@ -81,7 +81,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results")
     args = ap.parse_args(argv)
     sys.path.insert(0, str(REPO / "src"))
-    from dancesynth.eval import groundtruth as gt
+    from dancesynth.bench import groundtruth as gt
     from dancesynth.io.files import atomic_output
 
     with tempfile.TemporaryDirectory() as d:

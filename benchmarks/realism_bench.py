@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/realism_bench.py [--seeds 3] [--window-s 5] [--out benchmarks/results]
 
 A thin wrapper around the ``realism`` section of ``dancesynth bench``
-(``dancesynth.eval.bench_realism.realism_section``, full settings: the largest style,
+(``dancesynth.bench.realism.realism_section``, full settings: the largest style,
 20 % of its clips held out per seed, every bundled song of at least 20 s, every mocap
 engine, the mocap floor and a frozen pose). What it adds to the bench: the section
 alone, its own number of held-out splits and window, one table per split, and
@@ -30,8 +30,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results")
     args = ap.parse_args(argv)
     sys.path.insert(0, str(REPO / "src"))
-    from dancesynth.eval.bench_common import BenchConfig
-    from dancesynth.eval.bench_realism import format_realism, realism_section
+    from dancesynth.bench.common import BenchConfig
+    from dancesynth.bench.realism import format_realism, realism_section
     from dancesynth.motion.database import open_database
 
     cfg = replace(BenchConfig.full(), sections=("realism",), realism_seeds=args.seeds,

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from dancesynth.errors import DanceSynthError
-from dancesynth.eval.groundtruth import ground_truth_set
+from dancesynth.bench.groundtruth import ground_truth_set
 
 
 def main() -> int:

@@ -27,7 +27,7 @@ from dancesynth.engines.procedural import conduct_notes, default_skeleton, make_
 from dancesynth.engines.procedural.engine import plan_right_hand  # noqa: E402
 from dancesynth.engines.procedural.segment import segment  # noqa: E402
 from dancesynth.engines.procedural.speed import sample_path  # noqa: E402
-from dancesynth.eval import groundtruth as gt  # noqa: E402
+from dancesynth.bench import groundtruth as gt  # noqa: E402
 from dancesynth.kinematics import clip_fk  # noqa: E402
 from dancesynth.motion.roles import find_roles  # noqa: E402
 from dancesynth.motion.database import open_database  # noqa: E402

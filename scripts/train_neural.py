@@ -30,7 +30,7 @@ KEYS = ("bas_music", "hit_rate", "aligned_beat_ratio", "kinematic_beat_ratio", "
 
 def evaluate_model(seeds: int) -> dict:
     from dancesynth.api import analyse, dance
-    from dancesynth.eval.bench_structure import found_motifs, mocap_chi2
+    from dancesynth.bench.structure import found_motifs, mocap_chi2
     from dancesynth.eval.evaluate import evaluate, mocap_reference
     from dancesynth.motion.database import open_database
     from dancesynth.motion.motifs import chi2, load_motif_model

@@ -208,7 +208,7 @@ def test_the_dance_stops_on_the_beats_far_above_chance_and_a_random_walk(vibe, b
     from dancesynth.api import DanceConfig, dance
     from dancesynth.engines.graph.engine import EngineConfig
     from dancesynth.engines.graph.meta_graph import GraphConfig
-    from dancesynth.eval.bench_quality import walk_dance
+    from dancesynth.bench.quality import walk_dance
 
     ours = _accents(dance(vibe, database=bundled_db), vibe)
     assert ours["accent_precision_x_chance"] >= 2.5 and ours["accent_recall_x_chance"] >= 2.5

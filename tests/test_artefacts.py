@@ -194,7 +194,7 @@ def test_a_hand_at_rest_is_not_in_the_head():
 def song_music(request):
     # Vibe Ace is danced in salsa; Lets Go Fishin in the small jpop style, whose mocap barely
     # accelerates, so its transitions have the least room (one left jpop's elbow mid-hit: 1.08x p99).
-    from dancesynth.eval.bench_common import load_song
+    from dancesynth.bench.common import load_song
 
     return load_song(request.param)
 
@@ -205,7 +205,7 @@ def mocap_refs():
 
 
 def _reference(style, fps, refs):
-    from dancesynth.eval.bench_quality import at_fps
+    from dancesynth.bench.quality import at_fps
     from dancesynth.eval.evaluate import mocap_reference
 
     if style.name not in refs:

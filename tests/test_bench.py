@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 
 from dancesynth.errors import InputError
-from dancesynth.eval.bench import SECTIONS, BenchConfig, format_bench, run_bench
+from dancesynth.bench.run import SECTIONS, BenchConfig, format_bench, run_bench
 
 HUNGARIAN = "Hungarian_Dance_number_5_-_Allegro_in_F_sharp_minor_(string_orchestra).ogg"
 
 
 def tiny_config(tmp_path) -> BenchConfig:
-    from dancesynth.eval.groundtruth import SongSpec
+    from dancesynth.bench.groundtruth import SongSpec
 
     specs = (SongSpec("t120_4-4_drums", (120,), duration_s=12.0, seed=1),
              SongSpec("t90_3-4_nodrums", (90,), beats_per_bar=3, drums=False, duration_s=12.0, seed=2))
@@ -104,8 +104,8 @@ def test_our_dance_follows_the_music_intensity_better_than_a_random_walk(bench):
 
 def test_the_random_walk_still_dances_on_the_beat(bench, bundled_db):
     """Same renderer: the walk's beat alignment is like our dance's, and far above the same walk off the beat."""
-    from dancesynth.eval.bench_common import load_song
-    from dancesynth.eval.bench_quality import walk_dance
+    from dancesynth.bench.common import load_song
+    from dancesynth.bench.quality import walk_dance
     from dancesynth.eval.evaluate import evaluate
 
     mean = bench[0]["quality"]["mean"]
@@ -180,7 +180,7 @@ def test_tables_have_the_same_layout_whatever_the_numbers(bench):
 
 
 def test_a_section_that_cannot_run_is_recorded_and_the_others_run(tmp_path):
-    from dancesynth.eval.groundtruth import SongSpec
+    from dancesynth.bench.groundtruth import SongSpec
 
     cfg = replace(tiny_config(tmp_path), sections=("beat_tracking",),
                   groundtruth_specs=(SongSpec("bad", (120,), kind="wobble", duration_s=8.0),))

@@ -1,4 +1,4 @@
-"""The bench's realism section (eval.bench_realism) on a tiny setting: one short song, one split, two engines."""
+"""The bench's realism section (bench.realism) on a tiny setting: one short song, one split, two engines."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ from dataclasses import replace
 import pytest
 
 from dancesynth.errors import InputError
-from dancesynth.eval.bench import TARGETS, targets
-from dancesynth.eval.bench_common import BenchConfig
-from dancesynth.eval.bench_realism import format_realism, realism_section
+from dancesynth.bench.run import TARGETS, targets
+from dancesynth.bench.common import BenchConfig
+from dancesynth.bench.realism import format_realism, realism_section
 
 
 HUNGARIAN = "Hungarian_Dance_number_5_-_Allegro_in_F_sharp_minor_(string_orchestra).ogg"  # 46 s

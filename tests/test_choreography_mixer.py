@@ -13,8 +13,8 @@ from dancesynth.provenance import make_provenance
 from dancesynth.engines.choreography.mixer import MixerConfig, substitute_motifs
 from dancesynth.errors import InputError
 from dancesynth.eval import motion_metrics as mm
-from dancesynth.eval.bench_quality import at_fps
-from dancesynth.eval.bench_structure import found_motifs
+from dancesynth.bench.quality import at_fps
+from dancesynth.bench.structure import found_motifs
 from dancesynth.eval.evaluate import evaluate, mocap_reference
 from dancesynth.io.bvh import read_bvh, write_bvh
 from dancesynth.motion.database import MotionDatabase

@@ -12,7 +12,7 @@ import pytest
 from procedural_songs import chorale_midi, drum_beats, phrase_song
 
 from conftest import BUNDLED_MUSIC, REPO
-from dancesynth.eval import groundtruth as gt
+from dancesynth.bench import groundtruth as gt
 from dancesynth.io.bvh import read_bvh
 from dancesynth.kinematics import clip_fk
 from dancesynth.motion.roles import find_roles

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dancesynth.errors import InputError
-from dancesynth.eval import groundtruth as gt
+from dancesynth.bench import groundtruth as gt
 from dancesynth.io.audio import load_audio
 from dancesynth.music import track_beats
 

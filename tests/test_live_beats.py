@@ -83,7 +83,7 @@ def test_intensity_is_the_level_of_each_interval_closed_by_a_beat():
 @pytest.mark.skipif(shutil.which("fluidsynth") is None, reason="fluidsynth not installed")
 @pytest.mark.parametrize("tempo", [(90, 120), (140, 100)])
 def test_a_tempo_step_in_a_generated_song_is_followed(tmp_path_factory, tempo):
-    from dancesynth.eval.groundtruth import SongSpec, render_song
+    from dancesynth.bench.groundtruth import SongSpec, render_song
     from dancesynth.io.audio import load_audio
 
     spec = SongSpec(f"step{tempo[0]}-{tempo[1]}", tempo, kind="step", duration_s=24.0, seed=3)
@@ -100,7 +100,7 @@ def test_a_tempo_step_in_a_generated_song_is_followed(tmp_path_factory, tempo):
 def test_beats_given_early_on_the_wrong_phase_are_mended_by_a_rephase(tmp_path_factory):
     """At 60 bpm the first seconds look like 120 bpm with beats on the eighths; updated every
     chunk, the first beats are given on too little audio, and later ones must not follow them."""
-    from dancesynth.eval.groundtruth import SongSpec, render_song
+    from dancesynth.bench.groundtruth import SongSpec, render_song
     from dancesynth.io.audio import load_audio
 
     spec = SongSpec("c60", (60,), duration_s=20.0, seed=60)

@@ -11,7 +11,7 @@ import pytest
 
 import signals
 from dancesynth.errors import InputError
-from dancesynth.eval import groundtruth as gt
+from dancesynth.bench import groundtruth as gt
 from dancesynth.io.audio import load_audio
 from dancesynth.live.beats import stream_updates
 from dancesynth.music import analyze_music

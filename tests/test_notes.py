@@ -8,7 +8,7 @@ import pytest
 from procedural_songs import HAT, KICK, chorale_midi, drum_beats, phrase_song
 
 from dancesynth.errors import InputError
-from dancesynth.eval import groundtruth as gt
+from dancesynth.bench import groundtruth as gt
 from dancesynth.music.notes import DRUM_CHANNEL, midi_notes, read_midi, write_midi_parts
 
 

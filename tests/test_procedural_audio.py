@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dancesynth.errors import InputError
-from dancesynth.eval import groundtruth as gt
+from dancesynth.bench import groundtruth as gt
 from dancesynth.music.melody import audio_notes, read_notes
 from dancesynth.music.notes import DRUM_CHANNEL
 

@@ -11,7 +11,7 @@ from dancesynth.engines.procedural.bezier import bezier_tangents
 from dancesynth.engines.procedural.engine import plan_right_hand
 from dancesynth.engines.procedural.segment import segment
 from dancesynth.engines.procedural.speed import sample_path
-from dancesynth.eval import groundtruth as gt
+from dancesynth.bench import groundtruth as gt
 from dancesynth.io.bvh import read_bvh, write_bvh
 from dancesynth.kinematics import clip_fk
 from dancesynth.motion.roles import find_roles

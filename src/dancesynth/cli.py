@@ -334,7 +334,7 @@ def eval_(dance_path, song, json_path, plot_path, plot_from, plot_length, refere
               show_default=True, help="Folder for bench.json.")
 def bench(quick, out_dir):
     """Benchmarks: synthesis time (Xu Fig. 4), scaling, quality table, beat tracking on generated songs."""
-    from .eval.bench import format_bench, run_bench
+    from .bench.run import format_bench, run_bench
 
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError(f"--out {out_dir} is a file; give a folder for bench.json")

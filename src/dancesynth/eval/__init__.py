@@ -1,11 +1,11 @@
-"""Evaluation: metrics for a dance against its music, generated ground truth, benchmarks.
+"""Evaluation: metrics for a dance against its music.
 
 - ``metrics`` / ``evaluate``: pure metric functions and ``evaluate()`` returning a dict
   (beat alignment, intensity correspondence, smoothness, foot contact, time warp,
-  signature distance, beat-tracking accuracy).
-- ``groundtruth``: MIDI songs with exactly known beats rendered to audio by fluidsynth.
-- ``bench``: the benchmark tables of ``dancesynth bench``.
+  signature distance, beat-tracking accuracy); ``artefacts``, ``realism``: snaps and
+  FID/diversity.
+- ``report``: ``dancesynth eval`` as a library call (the only module here that reads files).
 
-Metrics import analysis layers and types only, never synthesis engines; the
-benchmark sits on top of everything.
+Metrics import analysis layers and types only, never synthesis engines. The benchmarks
+that use them are ``dancesynth.bench``.
 """

@@ -5,7 +5,7 @@ that trackers can be measured and swapped without touching callers:
 
 - ``"varying"`` (default): Ellis' dynamic programming following a local tempo
   curve, with a metrical-level check (``dancesynth.beat_tracking.dp_beat_track_varying``).
-  On the generated ground truth (``dancesynth.eval.groundtruth``: tempo steps,
+  On the generated ground truth (``dancesynth.bench.groundtruth``: tempo steps,
   ramps, swing, 3/4, 60-180 bpm) it scores mean F = 1.00 where one global tempo
   scores 0.93 (``dancesynth bench``).
 - ``"dp"``: Ellis' dynamic programming at one global tempo (``dancesynth.beat_tracking.dp_beat_track``).

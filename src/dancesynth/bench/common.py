@@ -48,7 +48,7 @@ class BenchConfig:
     groundtruth_specs: tuple | None = None  # SongSpecs overriding the standard set (tests)
     groundtruth_dir: Path | None = None     # cache of rendered songs (None: the dancesynth cache)
     trackers: tuple[str, ...] | None = None  # None: every tracker in TRACKERS
-    # 6. Global structure (bench_structure): Table I, Fig. 12, metrics per engine, re-creation.
+    # 6. Global structure (bench.structure): Table I, Fig. 12, metrics per engine, re-creation.
     structure_songs: tuple[str, ...] | None = None   # None: every bundled song ...
     structure_min_s: float = 20.0                     # ... long enough for a signature (not the 5 s trumpet)
     structure_max_s: float | None = None
@@ -62,12 +62,12 @@ class BenchConfig:
     recreate_style: str = "salsa-120-150bpm"
     recreate_song: str = DEFAULT_SONG
     recreate_clips: int | None = None      # None: every clip of the style in turn
-    # 7. Visible accents on the beats (bench_accents): every mocap engine on bundled and generated songs.
+    # 7. Visible accents on the beats (bench.accents): every mocap engine on bundled and generated songs.
     accent_songs: tuple[str, ...] | None = None  # bundled songs (None: all)
     accent_generated: bool = True                # also the generated set (groundtruth_quick / _specs apply)
     accent_engines: tuple[str, ...] = ("streaming", "lookahead", "signature", "global", "choreography", "random_walk",
                                        "paper")
-    # 8. Realism (bench_realism): FID_k/FID_g/Div_k/Div_g of every mocap engine against mocap held out of a style.
+    # 8. Realism (bench.realism): FID_k/FID_g/Div_k/Div_g of every mocap engine against mocap held out of a style.
     realism_style: str | None = None              # None: the largest style
     realism_songs: tuple[str, ...] | None = None  # bundled songs (None: every one ...)
     realism_min_s: float = 20.0                   # ... at least this long

@@ -1,6 +1,6 @@
 """Beat-tracking table: every tracker on generated songs whose beats are known exactly.
 
-The songs come from ``dancesynth.eval.groundtruth`` (MIDI rendered by fluidsynth);
+The songs come from ``dancesynth.bench.groundtruth`` (MIDI rendered by fluidsynth);
 each tracker in ``dancesynth.music.beats.TRACKERS`` runs through
 ``dancesynth.music.track_beats`` on the decoded audio, and is scored with
 ``beat_tracking_scores`` (F-measure within 70 ms, continuity CMLt/AMLt, the first
@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench_common import BenchConfig, Progress, table
+from .common import BenchConfig, Progress, table
 
 # Tag groups of the F-measure columns: name -> predicate on a song's tags.
 TAG_GROUPS = {
@@ -200,7 +200,7 @@ def bundled_metres(paths=None, *, streaming: bool = True) -> list[dict]:
     from ..io.audio import load_audio
     from ..live.beats import stream_updates
     from ..music import analyze_music
-    from .bench_common import MUSIC_DIR
+    from .common import MUSIC_DIR
 
     out = []
     for path in sorted(MUSIC_DIR.glob("*.ogg")) if paths is None else [Path(p) for p in paths]:

@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench_common import MUSIC_DIR, BenchConfig, Progress, load_song, table
-from .bench_quality import at_fps, mean_scores, mocap_scores
+from .common import MUSIC_DIR, BenchConfig, Progress, load_song, table
+from .quality import at_fps, mean_scores, mocap_scores
 
 TITLES = {"streaming": "streaming", "lookahead": "+lookahead", "signature": "+signature", "global": "global DP",
           "choreography": "choreography", "random_walk": "random walk", "paper": "paper", "mocap": "mocap*"}
@@ -96,8 +96,8 @@ def _default_cache() -> Path:
 
 def _score(clip, song: dict, reference, style, source_clips: list) -> dict:
     from ..motion.resample import sample_frames
-    from .artefacts import feet_vs_source, new_steps
-    from .evaluate import evaluate
+    from ..eval.artefacts import feet_vs_source, new_steps
+    from ..eval.evaluate import evaluate
 
     jumps = np.asarray(clip.provenance.transition_times_s, dtype=float)
     jumps = jumps[(jumps >= 0) & (jumps <= clip.duration_s)]
@@ -119,8 +119,8 @@ def _score(clip, song: dict, reference, style, source_clips: list) -> dict:
 
 
 def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
-    from .bench_structure import engine_dances
-    from .evaluate import mocap_reference
+    from .structure import engine_dances
+    from ..eval.evaluate import mocap_reference
 
     songs = _songs(cfg, progress)
     clips_by_style, refs, sources = {}, {}, {}
@@ -153,8 +153,8 @@ def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
 
 
 def _mocap_evaluate(clip, **kwargs):
-    from .artefacts import one_frame_steps
-    from .evaluate import evaluate
+    from ..eval.artefacts import one_frame_steps
+    from ..eval.evaluate import evaluate
 
     r = evaluate(clip, **kwargs)
     r["one_frame_steps"] = int(len(one_frame_steps(clip)))  # the capture's own glitches

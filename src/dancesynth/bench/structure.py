@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench_common import MUSIC_DIR, BenchConfig, Progress, load_song, table
-from .bench_quality import at_fps, mean_scores, walk_dance
+from .common import MUSIC_DIR, BenchConfig, Progress, load_song, table
+from .quality import at_fps, mean_scores, walk_dance
 
 GENRE = "salsa"
 ENGINES = ("mocap", "streaming", "signature", "global", "random_walk", "choreography", "neural")
@@ -122,7 +122,7 @@ def mocap_chi2(db, model) -> list[dict]:
 
 def structure(cfg: BenchConfig, db, progress: Progress | None = None, out_dir: Path | None = None) -> dict:
     from ..motion.motifs import load_motif_model
-    from .evaluate import evaluate
+    from ..eval.evaluate import evaluate
 
     model = load_motif_model(db)
     template = model.templates[GENRE]
@@ -182,8 +182,8 @@ def _mean(values):
 
 def _mocap_metrics(db, refs: dict, max_clips: int | None) -> dict:
     """The raw salsa clips' own metrics against their motion beats (as the quality table's mocap row)."""
-    from .bench_quality import mocap_scores
-    from .evaluate import evaluate
+    from .quality import mocap_scores
+    from ..eval.evaluate import evaluate
 
     rows = [mocap_scores(evaluate, clips, max_clips)["mean"] for clips in refs.values()]
     return {k: mean_scores(rows).get(k) for k in METRIC_KEYS}
@@ -270,7 +270,7 @@ def recreation(cfg: BenchConfig, db, model, progress) -> dict:
 
 
 def format_structure(s: dict) -> str:
-    from .evaluate import format_table
+    from ..eval.evaluate import format_table
 
     t = s["table_i"]
     rows = [[TITLES[e], t[e]["dances"], t[e]["chi2"], t[e].get("chi2_min"), t[e].get("chi2_max"),

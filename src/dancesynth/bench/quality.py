@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench_common import MUSIC_DIR, BenchConfig, Progress, load_song, table
+from .common import MUSIC_DIR, BenchConfig, Progress, load_song, table
 from ..provenance import EngineRun, make_provenance
 from ..types import MotionClip, MusicFeatures
 
@@ -118,7 +118,7 @@ def mean_scores(rows: list[dict]) -> dict:
 
 def quality(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
     from ..api import dance
-    from .evaluate import METRICS, evaluate
+    from ..eval.evaluate import METRICS, evaluate
 
     songs = cfg.quality_songs or tuple(sorted(p.name for p in MUSIC_DIR.glob("*.ogg")))
     per_song, mocap_by_style, clips_by_style = [], {}, {}
@@ -171,7 +171,7 @@ def format_quality(s: dict) -> str:
     """The metrics (rows, grouped as ``evaluate.METRICS``) of the four dances (columns), mean over songs."""
     columns = {TITLES[r]: s["mean"][r] for r in s["rows"]}
     try:
-        from .evaluate import format_table
+        from ..eval.evaluate import format_table
     except ImportError:  # formatting a result made elsewhere: a plain layout
         body = table("", ["metric"] + list(columns),
                      [[m] + [c.get(m) for c in columns.values()] for m in s["metrics"]], [0] + [3] * len(columns))

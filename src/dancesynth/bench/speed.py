@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench_common import BenchConfig, MUSIC_DIR, Progress, largest_style, linear_fit, table
+from .common import BenchConfig, MUSIC_DIR, Progress, largest_style, linear_fit, table
 
 # ---------------------------------------------------------------------------------------------
 # 1. Fig. 4
@@ -249,7 +249,7 @@ def scaling(cfg: BenchConfig, db, music, progress: Progress | None = None) -> di
     for times in cfg.scales:
         if progress:
             progress(f"scaling: database x{times} in a fresh process")
-        cmd = [sys.executable, "-c", "from dancesynth.eval.bench_speed import _worker_main; _worker_main()"]
+        cmd = [sys.executable, "-c", "from dancesynth.bench.speed import _worker_main; _worker_main()"]
         done = subprocess.run(cmd, input=json.dumps({"times": times, **args}), capture_output=True, text=True,
                               env=subprocess_env(), timeout=cfg.scale_timeout_s)
         if done.returncode != 0:

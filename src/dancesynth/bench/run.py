@@ -29,7 +29,6 @@ Library code never prints: progress goes to ``progress(message)``.
 
 from __future__ import annotations
 
-import importlib
 import json
 import os
 import platform
@@ -41,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench_common import SECTIONS, BenchConfig, Progress, skipped
+from .common import SECTIONS, BenchConfig, Progress, skipped
 from ..errors import InputError
 
 __all__ = ["BenchConfig", "SECTIONS", "run_bench", "format_bench"]
@@ -120,43 +119,39 @@ def _run_section(name: str, cfg: BenchConfig, shared: dict, progress, out_dir: P
 
         shared["db"] = open_database()
     if name in ("fig4", "scaling") and "music" not in shared:
-        from .bench_common import load_song
+        from .common import load_song
 
         shared["music"] = load_song(cfg.song, cfg.song_max_s)
     if name == "fig4":
-        from .bench_speed import fig4
+        from .speed import fig4
 
         return fig4(cfg, shared["db"], shared["music"], progress)
     if name == "scaling":
-        from .bench_speed import scaling
+        from .speed import scaling
 
         return scaling(cfg, shared["db"], shared["music"], progress)
     if name == "pipeline":
-        from .bench_speed import pipeline
+        from .speed import pipeline
 
         return pipeline(cfg, shared["db"], progress)
     if name == "quality":
-        try:
-            importlib.import_module(".evaluate", __package__)
-        except ImportError as exc:
-            raise _Skip(f"the metrics module is not available ({exc})") from None
-        from .bench_quality import quality
+        from .quality import quality
 
         return quality(cfg, shared["db"], progress)
     if name == "structure":
-        from .bench_structure import structure
+        from .structure import structure
 
         return structure(cfg, shared["db"], progress, out_dir)
     if name == "accents":
         import shutil
 
-        from .bench_accents import accents
+        from .accents import accents
 
         if cfg.accent_generated and shutil.which("fluidsynth") is None:
             raise _Skip("fluidsynth is not installed (apt-get install fluidsynth timgm6mb-soundfont)")
         return accents(cfg, shared["db"], progress)
     if name == "realism":
-        from .bench_realism import realism_section
+        from .realism import realism_section
 
         return realism_section(cfg, shared["db"], progress)
     if name == "beat_tracking":
@@ -166,11 +161,7 @@ def _run_section(name: str, cfg: BenchConfig, shared: dict, progress, out_dir: P
 
         if shutil.which("fluidsynth") is None:
             raise _Skip("fluidsynth is not installed (apt-get install fluidsynth timgm6mb-soundfont)")
-        try:
-            importlib.import_module(".groundtruth", __package__)
-        except ImportError as exc:
-            raise _Skip(f"the ground-truth module is not available ({exc})") from None
-        from .bench_beats import beat_tracking
+        from .beats import beat_tracking
 
         try:
             return beat_tracking(cfg, progress)
@@ -243,7 +234,7 @@ TARGETS = {
     **{f"{what} / the style's mocap's, highest (mean per engine and set)": ("accents", _furthest(key, 0.0), 1.1)
        for what, key in (("foot speed on the floor", "foot_skate_vs_mocap"), ("PFC", "pfc_vs_mocap"))},
     "one-frame joint steps over 30°, every engine and song": ("accents", _every_dance("one_frame_steps", sum), 0),
-    # Realism (bench_realism): no worse than today's streaming dance. 34 is the streaming dance's FID_k as
+    # Realism (bench.realism): no worse than today's streaming dance. 34 is the streaming dance's FID_k as
     # measured before the section existed (benchmarks/results/realism_bench.json: 33.4, salsa-120-150bpm,
     # 3 held-out splits, 4 songs, mocap floor 29.6); quick mode scores one split on one song, a noisier reading.
     "FID_k, streaming vs held-out mocap": ("realism", lambda s: s["mean"]["streaming"]["fid_k"], 34.0),
@@ -294,12 +285,12 @@ def _jsonable(x):
 
 def format_bench(result: dict) -> str:
     """The benchmark's tables as text: a header, then each section's table (or why it was skipped)."""
-    from .bench_accents import format_accents
-    from .bench_realism import format_realism
-    from .bench_beats import format_beat_tracking
-    from .bench_quality import format_quality
-    from .bench_speed import format_fig4, format_pipeline, format_scaling
-    from .bench_structure import format_structure
+    from .accents import format_accents
+    from .realism import format_realism
+    from .beats import format_beat_tracking
+    from .quality import format_quality
+    from .speed import format_fig4, format_pipeline, format_scaling
+    from .structure import format_structure
 
     formatters = {"fig4": format_fig4, "scaling": format_scaling, "pipeline": format_pipeline,
                   "quality": format_quality, "beat_tracking": format_beat_tracking, "structure": format_structure,
