@@ -92,6 +92,7 @@ def test_engines_are_deterministic_and_seeds_vary_the_dance(bundled_db, engine):
     assert any(not np.array_equal(o, a.provenance.source_frames) for o in others)
 
 
+@pytest.mark.slow
 def test_ten_minute_songs_never_run_out_of_path_on_any_style(bundled_db):
     """Capacity keeps every style dancing; with THC unknown (a live stream) too."""
     for style in bundled_db.styles.values():
@@ -210,6 +211,7 @@ def test_a_database_of_too_short_clips_is_a_clear_error(tmp_path):
         open_database(tmp_path / "short")
 
 
+@pytest.mark.slow
 def test_a_live_stream_of_unknown_length_never_runs_out_of_path(bundled_db):
     """THC = infinity (the remaining music is unknown): every segment ends where the dance can go on."""
     from dancesynth.engines.graph.cache import load_graph

@@ -105,6 +105,7 @@ def test_every_music_beat_still_shows_a_motion_beat_frame(dances, bundled_db):
             assert abs(src[f] - round(src[f])) < 1e-6 and int(round(src[f])) in beat_frames
 
 
+@pytest.mark.slow
 def test_capacity_is_never_exhausted_with_the_signature_term(bundled_db, model):
     """Known song length (THC = beats left) and a live stream (THC = inf), every style, a strong term."""
     for style in bundled_db.styles.values():
