@@ -7,7 +7,7 @@ import json
 import pytest
 
 from conftest import BUNDLED_MUSIC
-from test_cli import assert_clean_failure, run
+from test_cli import assert_clean_failure, cli, run
 
 SONG = BUNDLED_MUSIC / "Kevin_MacLeod_-_Vibe_Ace.ogg"
 
@@ -47,7 +47,7 @@ def test_motif_at_implies_the_choreography_engine(tmp_path):
 ])
 def test_bad_choreography_input(tmp_path, args, words):
     out = tmp_path / "dance.bvh"
-    assert_clean_failure(run("dance", SONG, "-o", out, *args), out, *words)
+    assert_clean_failure(cli("dance", SONG, "-o", out, *args), out, *words)
 
 
 def test_recreate_from_a_dance_on_another_skeleton(tmp_path, bundled_db):
@@ -55,5 +55,5 @@ def test_recreate_from_a_dance_on_another_skeleton(tmp_path, bundled_db):
 
     ref, out = tmp_path / "mj.bvh", tmp_path / "dance.bvh"
     write_bvh(ref, bundled_db.styles["mj"].clip(0))
-    assert_clean_failure(run("dance", SONG, "-o", out, "--style", "salsa", "--recreate", ref), out,
+    assert_clean_failure(cli("dance", SONG, "-o", out, "--style", "salsa", "--recreate", ref), out,
                          "skeleton of 31 joints", "no style uses")

@@ -25,6 +25,20 @@ def run(*args, cwd=None, timeout=120):
                           text=True, cwd=cwd, env=env, timeout=timeout)
 
 
+def cli(*args) -> subprocess.CompletedProcess:
+    """The command line run in this process, as ``run`` but without starting Python again: for
+    checks of what a command says and leaves behind (``run`` where the process itself matters)."""
+    import contextlib
+    import io
+
+    from dancesynth.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main([str(a) for a in args])
+    return subprocess.CompletedProcess(list(args), code, out.getvalue(), err.getvalue())
+
+
 def assert_clean_failure(proc, out: Path, *words):
     assert proc.returncode != 0, proc.stdout + proc.stderr
     assert "Traceback" not in proc.stderr
@@ -62,32 +76,32 @@ def test_styles_lists_the_bundled_styles():
 
 
 def test_missing_file(out):
-    assert_clean_failure(run("dance", out.parent / "nope.ogg", "-o", out), out, "nope.ogg")
+    assert_clean_failure(cli("dance", out.parent / "nope.ogg", "-o", out), out, "nope.ogg")
 
 
 def test_empty_file(tmp_path, out):
     empty = tmp_path / "empty.wav"
     empty.write_bytes(b"")
-    assert_clean_failure(run("dance", empty, "-o", out), out, "empty")
+    assert_clean_failure(cli("dance", empty, "-o", out), out, "empty")
 
 
 def test_text_file_named_mp3(tmp_path, out):
     fake = tmp_path / "song.mp3"
     fake.write_text("this is not music\n" * 50)
-    assert_clean_failure(run("dance", fake, "-o", out), out, "song.mp3")
+    assert_clean_failure(cli("dance", fake, "-o", out), out, "song.mp3")
 
 
 def test_truncated_ogg(tmp_path, out):
     src = BUNDLED_MUSIC / "Kevin_MacLeod_-_Vibe_Ace.ogg"
     cut = tmp_path / "cut.ogg"
     cut.write_bytes(src.read_bytes()[: int(src.stat().st_size * 0.4)])
-    assert_clean_failure(run("dance", cut, "-o", out), out, "truncated")
+    assert_clean_failure(cli("dance", cut, "-o", out), out, "truncated")
 
 
 def test_silence(tmp_path, out):
     path = tmp_path / "silence.wav"
     sf.write(path, np.zeros(22050 * 10, dtype=np.float32), 22050)
-    assert_clean_failure(run("dance", path, "-o", out), out, "silent")
+    assert_clean_failure(cli("dance", path, "-o", out), out, "silent")
 
 
 def test_white_noise_dances_at_the_default_tempo(tmp_path, out):
@@ -103,7 +117,7 @@ def test_two_second_song(tmp_path, out):
     y, sr = sf.read(TRUMPET)
     path = tmp_path / "short.wav"
     sf.write(path, y[: 2 * sr], sr)
-    assert_clean_failure(run("dance", path, "-o", out), out, "short")
+    assert_clean_failure(cli("dance", path, "-o", out), out, "short")
 
 
 def test_one_hour_song_is_refused_quickly(tmp_path, out):
@@ -118,14 +132,14 @@ def test_one_hour_song_is_refused_quickly(tmp_path, out):
 
 
 def test_unknown_style(out):
-    assert_clean_failure(run("dance", TRUMPET, "-o", out, "--style", "tango"), out, "tango", "styles")
+    assert_clean_failure(cli("dance", TRUMPET, "-o", out, "--style", "tango"), out, "tango", "styles")
 
 
 def test_database_folder_without_bvh(tmp_path, out):
     folder = tmp_path / "db"
     folder.mkdir()
     (folder / "readme.txt").write_text("no motion here")
-    assert_clean_failure(run("dance", TRUMPET, "-o", out, "--database", folder), out, "no .bvh")
+    assert_clean_failure(cli("dance", TRUMPET, "-o", out, "--database", folder), out, "no .bvh")
 
 
 def test_malformed_bvh_inside_a_database(tmp_path, out):
@@ -169,14 +183,14 @@ def test_a_user_database_of_bvh_files_is_built_and_used(tmp_path, out):
 
 
 def test_graph_thresholds_are_checked(out):
-    assert_clean_failure(run("dance", TRUMPET, "-o", out, "--thr", "0.5"), out, "THR")
+    assert_clean_failure(cli("dance", TRUMPET, "-o", out, "--thr", "0.5"), out, "THR")
 
 
 @pytest.mark.parametrize("args, words", [(("--lookahead", "-1"), ("look-ahead", "0 to 600")),
                                          (("--lookahead", "nan"), ("look-ahead",)),
                                          (("--lookahead", "5", "--engine", "global"), ("--lookahead", "global"))])
 def test_lookahead_is_checked(out, args, words):
-    assert_clean_failure(run("dance", TRUMPET, "-o", out, *args), out, *words)
+    assert_clean_failure(cli("dance", TRUMPET, "-o", out, *args), out, *words)
 
 
 def test_build_db_writes_a_database_that_dance_can_use(tmp_path, out):
@@ -194,7 +208,7 @@ def test_build_db_writes_a_database_that_dance_can_use(tmp_path, out):
     (("--max-minutes", "nan"), ("length limit", "nan")),  # issue 13: switched the limit off
 ])
 def test_nonsense_options_are_refused(out, args, words):
-    assert_clean_failure(run("dance", TRUMPET, "-o", out, *args), out, *words)
+    assert_clean_failure(cli("dance", TRUMPET, "-o", out, *args), out, *words)
 
 
 def test_dance_config_refuses_seeds_numpy_cannot_take():

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from procedural_songs import chorale_midi, drum_beats, phrase_song
+from test_cli import cli
 
 from conftest import BUNDLED_MUSIC, REPO
 from dancesynth.bench import groundtruth as gt
@@ -104,16 +105,16 @@ def _write_bad(tmp_path: Path, case: str) -> Path:
 ])
 def test_bad_midi_files(tmp_path, case, words):
     out = tmp_path / "out.bvh"
-    assert_clean_failure(run(_write_bad(tmp_path, case), "-o", out), out, *words)
+    assert_clean_failure(cli("conduct", _write_bad(tmp_path, case), "-o", out), out, *words)
 
 
 def test_bad_options(tmp_path):
     song = phrase_song(tmp_path / "p.mid")
     out = tmp_path / "out.bvh"
-    assert_clean_failure(run(song, "-o", out, "--param", "l1=huge"), out, "l1", "number")
-    assert_clean_failure(run(song, "-o", out, "--param", "speed=3"), out, "unknown parameter")
-    assert_clean_failure(run(song, "-o", out, "--melody-track", "9"), out, "no part 9")
-    assert_clean_failure(run(song, "-o", tmp_path / "out.txt"), tmp_path / "out.txt", ".bvh")
-    assert_clean_failure(run(tmp_path / "missing.mid", "-o", out), out, "no such")
-    assert_clean_failure(run(TRUMPET, "-o", out, "--melody-track", "1"), out, "recording")
-    assert_clean_failure(run(TRUMPET, "--list-tracks"), out, "recording")
+    assert_clean_failure(cli("conduct", song, "-o", out, "--param", "l1=huge"), out, "l1", "number")
+    assert_clean_failure(cli("conduct", song, "-o", out, "--param", "speed=3"), out, "unknown parameter")
+    assert_clean_failure(cli("conduct", song, "-o", out, "--melody-track", "9"), out, "no part 9")
+    assert_clean_failure(cli("conduct", song, "-o", tmp_path / "out.txt"), tmp_path / "out.txt", ".bvh")
+    assert_clean_failure(cli("conduct", tmp_path / "missing.mid", "-o", out), out, "no such")
+    assert_clean_failure(cli("conduct", TRUMPET, "-o", out, "--melody-track", "1"), out, "recording")
+    assert_clean_failure(cli("conduct", TRUMPET, "--list-tracks"), out, "recording")

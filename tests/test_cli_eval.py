@@ -9,7 +9,7 @@ import pytest
 
 import signals
 from conftest import BUNDLED_MUSIC, SHARED_MOCAP, requires_shared
-from test_cli import assert_clean_failure, run
+from test_cli import assert_clean_failure, cli, run
 
 TRUMPET = BUNDLED_MUSIC / "sorohanro_-_solo-trumpet-06.ogg"
 VIBE_ACE = BUNDLED_MUSIC / "Kevin_MacLeod_-_Vibe_Ace.ogg"
@@ -34,13 +34,13 @@ def test_beats_prints_and_writes_the_beats_of_a_click_track(tmp_path):
 def test_beats_bad_input(tmp_path):
     text = tmp_path / "notes.mp3"
     text.write_text("not audio")
-    assert_clean_failure(run("beats", text, "--json", tmp_path / "b.json"), tmp_path / "b.json", "notes.mp3")
+    assert_clean_failure(cli("beats", text, "--json", tmp_path / "b.json"), tmp_path / "b.json", "notes.mp3")
     y, _ = signals.click_track(120, 6.0)
     song = tmp_path / "clicks.wav"
     signals.write(song, y, signals.SR)
-    assert_clean_failure(run("beats", song, "--json", tmp_path / "nowhere" / "b.json"),
+    assert_clean_failure(cli("beats", song, "--json", tmp_path / "nowhere" / "b.json"),
                          tmp_path / "nowhere" / "b.json", "does not exist")
-    assert_clean_failure(run("beats", song, "--tracker", "magic"), tmp_path / "none", "unknown tracker")
+    assert_clean_failure(cli("beats", song, "--tracker", "magic"), tmp_path / "none", "unknown tracker")
 
 
 @pytest.fixture(scope="module")
@@ -74,7 +74,7 @@ def test_eval_plot_window_is_chosen_and_checked(trumpet_dance, tmp_path):
     proc = run("eval", dance, TRUMPET, "--plot", tmp_path / "late.png", "--plot-from", "2", "--plot-length", "2")
     assert proc.returncode == 0, proc.stderr
     assert "2.0-4.0 s of" in proc.stdout and (tmp_path / "late.png").stat().st_size > 10_000
-    assert_clean_failure(run("eval", dance, TRUMPET, "--plot", tmp_path / "x.png", "--plot-from", "99"),
+    assert_clean_failure(cli("eval", dance, TRUMPET, "--plot", tmp_path / "x.png", "--plot-from", "99"),
                          tmp_path / "x.png", "past the song's end")
 
 
@@ -109,16 +109,16 @@ def test_eval_bad_input(trumpet_dance, tmp_path):
     dance = trumpet_dance / "dance.bvh"
     out = tmp_path / "eval.json"
     # A dance of another song: the lengths give it away.
-    assert_clean_failure(run("eval", dance, VIBE_ACE, "--json", out), out, "lasts")
+    assert_clean_failure(cli("eval", dance, VIBE_ACE, "--json", out), out, "lasts")
     not_bvh = tmp_path / "dance.bvh"
     not_bvh.write_text("MOTION\nFrames: 0\n")
-    assert_clean_failure(run("eval", not_bvh, TRUMPET, "--json", out), out, "dance.bvh")
+    assert_clean_failure(cli("eval", not_bvh, TRUMPET, "--json", out), out, "dance.bvh")
     garbage = tmp_path / "report.json"
     garbage.write_text("{not json")
-    assert_clean_failure(run("eval", dance, TRUMPET, "--report", garbage, "--json", out), out, "report")
-    assert_clean_failure(run("eval", dance, TRUMPET, "--style", "tango", "--json", out), out, "unknown style")
-    assert_clean_failure(run("eval", dance, tmp_path / "missing.ogg", "--json", out), out, "missing.ogg")
-    assert_clean_failure(run("eval", dance, TRUMPET, "--plot", tmp_path / "plot.xyz"), tmp_path / "plot.xyz",
+    assert_clean_failure(cli("eval", dance, TRUMPET, "--report", garbage, "--json", out), out, "report")
+    assert_clean_failure(cli("eval", dance, TRUMPET, "--style", "tango", "--json", out), out, "unknown style")
+    assert_clean_failure(cli("eval", dance, tmp_path / "missing.ogg", "--json", out), out, "missing.ogg")
+    assert_clean_failure(cli("eval", dance, TRUMPET, "--plot", tmp_path / "plot.xyz"), tmp_path / "plot.xyz",
                          "plot")
 
 

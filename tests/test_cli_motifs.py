@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from test_cli import assert_clean_failure, run
+from test_cli import assert_clean_failure, cli, run
 
 JPOP_EXCERPT = Path(__file__).resolve().parent / "data" / "mocap" / "perfume_mit" / "A_test.bvh"  # 3 s
 
@@ -61,10 +61,10 @@ def test_motifs_bad_input(tmp_path):
     out = tmp_path / "m.json"
     text = tmp_path / "notes.bvh"
     text.write_text("this is not motion capture")
-    assert_clean_failure(run("motifs", text, "--json", out), out, "notes.bvh")
-    assert_clean_failure(run("motifs", tmp_path / "absent.bvh", "--json", out), out, "absent.bvh")
-    assert_clean_failure(run("motifs", JPOP_EXCERPT, "--genre", "polka", "--json", out), out, "unknown genre", "salsa")
-    assert_clean_failure(run("motifs", JPOP_EXCERPT, "--json", tmp_path / "nowhere" / "m.json"),
+    assert_clean_failure(cli("motifs", text, "--json", out), out, "notes.bvh")
+    assert_clean_failure(cli("motifs", tmp_path / "absent.bvh", "--json", out), out, "absent.bvh")
+    assert_clean_failure(cli("motifs", JPOP_EXCERPT, "--genre", "polka", "--json", out), out, "unknown genre", "salsa")
+    assert_clean_failure(cli("motifs", JPOP_EXCERPT, "--json", tmp_path / "nowhere" / "m.json"),
                          tmp_path / "nowhere" / "m.json", "does not exist")
 
 
@@ -74,10 +74,10 @@ def test_motifs_refuses_a_skeleton_without_legs_and_a_dance_too_short(tmp_path):
     out = tmp_path / "m.json"
     legless = tmp_path / "legless.bvh"
     legless.write_text(TWO_JOINTS)
-    assert_clean_failure(run("motifs", legless, "--json", out), out, "legs")
+    assert_clean_failure(cli("motifs", legless, "--json", out), out, "legs")
     lines = JPOP_EXCERPT.read_text().splitlines()
     header = lines.index("MOTION")
     short = tmp_path / "short.bvh"
     body = lines[header + 3: header + 3 + 12]
     short.write_text("\n".join(lines[:header + 1] + [f"Frames: {len(body)}", lines[header + 2]] + body) + "\n")
-    assert_clean_failure(run("motifs", short, "--json", out), out, "no motion word", "longer dance")
+    assert_clean_failure(cli("motifs", short, "--json", out), out, "no motion word", "longer dance")

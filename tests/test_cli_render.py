@@ -9,7 +9,7 @@ import pytest
 import soundfile as sf
 
 from conftest import BUNDLED_MUSIC
-from test_cli import assert_clean_failure, run
+from test_cli import assert_clean_failure, cli, run
 
 TRUMPET = BUNDLED_MUSIC / "sorohanro_-_solo-trumpet-06.ogg"
 
@@ -34,9 +34,9 @@ def test_render_writes_an_mp4_with_video_and_audio_of_the_songs_length(tmp_path)
 def test_render_bad_input(tmp_path):
     dance = tmp_path / "dance.bvh"
     assert run("dance", TRUMPET, "-o", dance, "-q").returncode == 0
-    assert_clean_failure(run("render", dance, TRUMPET, "-o", tmp_path / "dance.avi"), tmp_path / "dance.avi", "mp4")
+    assert_clean_failure(cli("render", dance, TRUMPET, "-o", tmp_path / "dance.avi"), tmp_path / "dance.avi", "mp4")
     not_bvh = tmp_path / "x.bvh"
     not_bvh.write_text("hello")
-    assert_clean_failure(run("render", not_bvh, TRUMPET, "-o", tmp_path / "x.mp4"), tmp_path / "x.mp4", "x.bvh")
-    assert_clean_failure(run("render", dance, TRUMPET, "-o", tmp_path / "big.mp4", "--width", "100000"),
+    assert_clean_failure(cli("render", not_bvh, TRUMPET, "-o", tmp_path / "x.mp4"), tmp_path / "x.mp4", "x.bvh")
+    assert_clean_failure(cli("render", dance, TRUMPET, "-o", tmp_path / "big.mp4", "--width", "100000"),
                          tmp_path / "big.mp4", "width")
