@@ -15,6 +15,7 @@ import contextlib
 import os
 import re
 import shutil
+import signal
 import subprocess
 import tempfile
 import time
@@ -73,7 +74,7 @@ def render_video(dance: MotionClip, song_path: Path | None, out_path: Path, *, w
     renderer = FrameRenderer(dance, width, height)
     with atomic_path(out_path) as tmp:
         cmd = ffmpeg_command(ffmpeg, tmp, width=width, height=height, fps=fps_out, n_frames=n, song=song)
-        _encode(cmd, renderer.frames(source), n, progress)
+        _encode(cmd, renderer.frames(source), n, progress, out_path)
     return {"frames": n, "duration_s": n / fps_out, "seconds": time.perf_counter() - t0, "fps": fps_out,
             "width": width, "height": height, "audio": song is not None, "path": str(out_path)}
 
@@ -219,8 +220,9 @@ def ffmpeg_command(ffmpeg: str, out: Path, *, width: int, height: int, fps: floa
     return cmd
 
 
-def _encode(cmd: list[str], frames, total: int, progress) -> None:
-    """Pipe ``frames`` (bytes) into ffmpeg; raise ``DanceSynthError`` with ffmpeg's message if it fails."""
+def _encode(cmd: list[str], frames, total: int, progress, out_path: Path) -> None:
+    """Pipe ``frames`` (bytes) into ffmpeg; raise ``InputError`` naming ``out_path`` with ffmpeg's message if
+    it fails (a full disk, a song it cannot read), ``DanceSynthError`` if this ffmpeg cannot encode at all."""
     every = max(1, total // 200)
     if progress is not None:
         progress(0, total)
@@ -254,7 +256,7 @@ def _encode(cmd: list[str], frames, total: int, progress) -> None:
                 proc.stdin.close()
         if rc != 0 or broken:
             err.seek(0)
-            raise DanceSynthError(_ffmpeg_failure(err.read().decode("utf-8", "replace"), rc))
+            raise _ffmpeg_failure(err.read().decode("utf-8", "replace"), rc, out_path)
 
 
 def _grow_pipe(pipe) -> None:
@@ -265,11 +267,18 @@ def _grow_pipe(pipe) -> None:
         fcntl.fcntl(pipe.fileno(), fcntl.F_SETPIPE_SZ, _PIPE_BYTES)
 
 
-def _ffmpeg_failure(stderr: str, rc: int) -> str:
+def _ffmpeg_failure(stderr: str, rc: int, out_path: Path) -> DanceSynthError:
     # The first line names the cause; later ones say what could not be done about it.
     lines = [re.sub(r"^\[[^]]* @ 0x[0-9a-f]+\] ", "", ln.strip()) for ln in stderr.strip().splitlines() if ln.strip()]
-    why = lines[0][:300] if lines else f"exit status {rc}"
-    hint = "check the free disk space and that the song plays"
+    if lines:
+        why = lines[0][:300]
+    elif rc == -signal.SIGXFSZ:  # killed for a file over the system's size limit: to a user, a full disk
+        why = "File too large"
+    elif rc < 0:
+        why = f"ffmpeg was stopped by signal {-rc}"
+    else:
+        why = f"ffmpeg exit status {rc}"
     if "Unknown encoder 'libx264'" in stderr or "Encoder not found" in stderr:
-        hint = "this ffmpeg lacks the libx264 encoder: install a full build (e.g. `sudo apt install ffmpeg`)"
-    return f"ffmpeg failed to write the video ({why}); {hint}"
+        return DanceSynthError(f"this ffmpeg lacks the libx264 encoder ({why}): install a full build "
+                               "(e.g. `sudo apt install ffmpeg`)")
+    return InputError(f"cannot write {out_path}: {why}; check the free disk space and that the song plays")
