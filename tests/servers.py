@@ -8,6 +8,7 @@ import http.server
 import socket
 import threading
 import time
+from pathlib import Path
 
 
 def free_port() -> int:
@@ -54,3 +55,84 @@ def http_folder(directory, handler=QuietHandler):
         httpd.shutdown()
         httpd.server_close()
         thread.join(timeout=10)
+
+
+def radio(payload: bytes, rate: float, *, stall_at: int | None = None, stall_s: float = 0.0, resume: bool = True,
+          content_type: str = "audio/mpeg"):
+    """A handler class for an Internet radio: ``payload`` sent at ``rate`` bytes/s with no length.
+
+    Once ``stall_at`` bytes are out it sends nothing for ``stall_s`` s (connections stay open), then goes
+    on (``resume``) or goes off the air (closes, and later connections get 503). A new connection gets
+    the broadcast from where it is now (a live stream has no past).
+    """
+
+    class Radio(QuietHandler):
+        sent = 0
+        stall_until: float | None = None
+
+        def do_GET(self):
+            cls = type(self)
+            if cls.sent >= len(payload) or self._off_air():
+                self.send_error(503)
+                return
+            self.send_response(200)
+            self.send_header("Content-Type", content_type)
+            self.end_headers()
+            step = max(int(rate / 10), 1)
+            try:
+                while cls.sent < len(payload):
+                    if stall_at is not None and cls.sent >= stall_at and cls.stall_until is None:
+                        cls.stall_until = time.monotonic() + stall_s
+                    if cls.stall_until is not None and time.monotonic() < cls.stall_until:
+                        time.sleep(0.1)  # silent, the connection open
+                        continue
+                    if self._off_air():
+                        return
+                    end = min(cls.sent + step, len(payload))
+                    if stall_at is not None and cls.stall_until is None:
+                        end = min(end, max(stall_at, cls.sent + 1))
+                    self.wfile.write(payload[cls.sent:end])
+                    self.wfile.flush()
+                    cls.sent = end
+                    time.sleep(0.1)
+            except OSError:  # the listener went away
+                pass
+
+        def _off_air(self) -> bool:
+            return not resume and self.stall_until is not None and time.monotonic() >= self.stall_until
+
+    return Radio
+
+
+def range_ignoring(cut: float = 0.4):
+    """A handler class serving files with their length but ignoring HTTP Range, cutting every connection
+    off after ``cut`` of the file (a reconnect that asks to resume gets the file from its start again)."""
+
+    class RangeIgnoring(QuietHandler):
+        requests = 0
+
+        def do_GET(self):
+            type(self).requests += 1
+            data = (Path(self.directory) / self.path.lstrip("/")).read_bytes()
+            self.send_response(200)
+            self.send_header("Content-Length", str(len(data)))
+            self.end_headers()
+            self.wfile.write(data[:int(len(data) * cut)])
+            self.wfile.flush()
+            self.connection.shutdown(socket.SHUT_RDWR)
+
+    return RangeIgnoring
+
+
+def silent(hold_s: float = 60.0):
+    """A handler class that answers 200 with an audio type and then sends nothing for ``hold_s`` s."""
+
+    class Silent(QuietHandler):
+        def do_GET(self):
+            self.send_response(200)
+            self.send_header("Content-Type", "audio/mpeg")
+            self.end_headers()
+            self.wfile.flush()
+            time.sleep(hold_s)
+
+    return Silent

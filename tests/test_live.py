@@ -5,9 +5,12 @@ from __future__ import annotations
 import io
 import os
 import re
+import resource
+import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -17,7 +20,7 @@ import soundfile as sf
 
 import signals
 from conftest import BUNDLED_MUSIC, REPO
-from servers import QuietHandler, http_folder
+from servers import QuietHandler, http_folder, radio, range_ignoring
 from dancesynth.errors import InputError
 from dancesynth.io.bvh import read_bvh
 from dancesynth.io.bvh_writer import BVHStreamWriter
@@ -238,3 +241,151 @@ def test_a_dropped_connection_is_resumed_and_the_whole_song_is_danced(tmp_path):
     first, resumed = _DroppingServer.requests[:2]
     assert first in (None, "bytes=0-") and int(re.match(r"bytes=(\d+)-", resumed).group(1)) > 0
     assert read_bvh(out).duration_s == pytest.approx(12.0, abs=0.2)
+
+
+# -- issue 13, item 7: live faults ----------------------------------------------------------------
+
+
+def _excerpt(tmp_path, fmt: str, seconds: float) -> Path:
+    """``seconds`` of Vibe Ace as Ogg, mono WAV or a 64 kbit/s MP3 (8,000 bytes a second)."""
+    out = tmp_path / f"excerpt.{fmt}"
+    codec = {"ogg": [], "wav": ["-ac", "1"], "mp3": ["-b:a", "64k"]}[fmt]
+    subprocess.run(["ffmpeg", "-loglevel", "error", "-y", "-t", str(seconds), "-i", str(VIBE_ACE), "-vn", *codec,
+                    str(out)], check=True)
+    return out
+
+
+def _stream(*args, stdin: bytes | None = None, preexec=None, timeout=90):
+    """``dancesynth stream`` as a user runs it (``run``, with standard input and process limits)."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(REPO / ".cache" / "numba")}
+    return subprocess.run([sys.executable, "-m", "dancesynth.cli", "stream", *map(str, args)], input=stdin,
+                          capture_output=True, env=env, timeout=timeout, preexec_fn=preexec)
+
+
+def _one_error(proc) -> str:
+    stderr = proc.stderr.decode() if isinstance(proc.stderr, bytes) else proc.stderr
+    assert "Traceback" not in stderr and "internal error" not in stderr, stderr
+    errors = [line for line in stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, stderr
+    return errors[0]
+
+
+@pytest.mark.parametrize("fmt", ["ogg", "wav"])
+def test_junk_before_a_stream_on_stdin_is_skipped(tmp_path, fmt):
+    """4 KB of noise before the stream (once: 'no audio could be decoded'); MP3 was always found by ffmpeg."""
+    song = _excerpt(tmp_path, fmt, 6.0)
+    junk = np.random.default_rng(3).bytes(4096)
+    out = tmp_path / "live.bvh"
+    proc = _stream("-", "-o", out, "--fast", "--segment-seconds", "2", stdin=junk + song.read_bytes())
+    assert proc.returncode == 0, proc.stderr.decode()
+    assert read_bvh(out).duration_s == pytest.approx(6.0, abs=0.2)
+
+
+@pytest.mark.parametrize("fmt, stdin", [("ogg", False), ("ogg", True), ("wav", True)])
+def test_a_source_cut_off_mid_stream_ends_with_an_error_and_keeps_the_dance(tmp_path, fmt, stdin):
+    """A download or a pipe that dies half-way is no normal end (it was exit 0 and no notice)."""
+    data = _excerpt(tmp_path, fmt, 10.0).read_bytes()
+    cut = tmp_path / f"cut.{fmt}"
+    cut.write_bytes(data[:len(data) // 2])
+    out = tmp_path / "live.bvh"
+    source = "-" if stdin else cut
+    proc = _stream(source, "-o", out, "--fast", "--segment-seconds", "2", stdin=cut.read_bytes() if stdin else None)
+    assert proc.returncode == 2
+    error = _one_error(proc)
+    assert "broke off" in error and "cut off" in error and str(out) in error
+    assert read_bvh(out).duration_s == pytest.approx(5.0, abs=0.5)
+
+
+def test_a_server_that_ignores_range_is_not_replayed_as_new_music(tmp_path):
+    """ffmpeg's reconnect to a server that ignores Range played the file from its start again, forever
+    (6,615 s 'heard' in 61 s): now the stream ends where the connection broke, with an error."""
+    song = _excerpt(tmp_path, "mp3", 10.0)
+    handler = range_ignoring(cut=0.4)
+    out = tmp_path / "live.bvh"
+    with http_folder(tmp_path, handler=handler) as url:
+        proc = _stream(f"{url}/{song.name}", "-o", out, "--fast", "--segment-seconds", "2", timeout=60)
+    assert proc.returncode == 2
+    assert "broke off" in _one_error(proc)
+    assert read_bvh(out).duration_s <= 0.4 * 10.0 + 0.5
+    assert handler.requests == 1
+
+
+def _disk_of(limit: int):
+    def preexec():
+        # A full disk for real, without root: a write past ``limit`` bytes fails with EFBIG.
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    return preexec
+
+
+def test_a_full_disk_leaves_a_complete_bvh_of_every_segment_written(tmp_path):
+    """It left an unreadable BVH and an internal error; now the BVH holds each segment reported, also
+    when more segments were already on their way when the disk filled up (20 s of music, 2 s segments)."""
+    out = tmp_path / "live.bvh"
+    song = _excerpt(tmp_path, "ogg", 20.0)
+    proc = _stream(song, "-o", out, "--fast", "--segment-seconds", "2", preexec=_disk_of(150_000))
+    assert proc.returncode == 2
+    error = _one_error(proc)
+    assert error.startswith(f"error: cannot write {out}:") and "File too large" in error
+    ends = [float(m) for m in re.findall(rb"motion\s+[\d.]+-\s*([\d.]+) s", proc.stdout)]
+    assert ends, proc.stdout.decode()
+    clip = read_bvh(out)
+    assert clip.duration_s == pytest.approx(ends[-1], abs=1.5 / clip.fps)
+    assert np.all(np.isfinite(clip.local_rot))
+
+
+def _frames_on_disk(path: Path) -> int:
+    match = re.search(rb"Frames:\s*(\d+)", path.read_bytes()[:1 << 16]) if path.exists() else None
+    return int(match.group(1)) if match else 0
+
+
+@pytest.mark.slow
+def test_a_radio_that_stalls_keeps_the_dancer_dancing_in_real_time(tmp_path):
+    """4 s of music, 8 s of nothing on an open connection, 3 s more: motion reaches the BVH all through
+    the stall at the wall clock's pace (a segment's wait at most), not in one burst when music returns."""
+    mp3 = _excerpt(tmp_path, "mp3", 7.0).read_bytes()
+    stall_s, segment_s = 8.0, 2.0
+    handler = radio(mp3, 8000.0, stall_at=4 * 8000, stall_s=stall_s)
+    out = tmp_path / "live.bvh"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(REPO / ".cache" / "numba")}
+    with http_folder(tmp_path, handler=handler) as url:
+        proc = subprocess.Popen([sys.executable, "-m", "dancesynth.cli", "stream", f"{url}/radio", "-o", str(out),
+                                 "--segment-seconds", str(segment_s)], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, env=env)
+        seen = []  # (wall time, frames on disk)
+        deadline = time.monotonic() + 90
+        while proc.poll() is None and time.monotonic() < deadline:
+            seen.append((time.monotonic(), _frames_on_disk(out)))
+            time.sleep(0.1)
+        proc.kill()
+        _, stderr = proc.communicate()
+    start = handler.stall_until - stall_s
+    during = [n for t, n in seen if start <= t <= handler.stall_until]
+    # Motion for all the stall but the wait before it counts as one and a segment's cut.
+    assert (during[-1] - during[0]) / 30.0 >= stall_s - 2 * segment_s - 0.5, seen
+    assert "Traceback" not in stderr.decode()
+
+
+def test_every_viewer_of_a_source_that_dies_is_told(tmp_path):
+    """The web live view of a radio that goes off air: each viewer gets an error saying it broke off
+    (it ended with an 'end' message, as if the song was over)."""
+    from urllib.parse import urlencode
+
+    from servers import uvicorn_server
+    from test_serve import live_messages
+    from dancesynth.web.server import create_app
+
+    mp3 = _excerpt(tmp_path, "mp3", 5.0).read_bytes()
+    with http_folder(tmp_path, handler=radio(mp3, 8000.0, stall_at=3 * 8000, resume=False)) as url, \
+            uvicorn_server(create_app()) as server:
+        query = urlencode({"url": f"{url}/radio", "segment_s": 1})
+        results = [None, None]
+        viewers = [threading.Thread(target=lambda i=i: results.__setitem__(i, live_messages(server, query, 60)))
+                   for i in range(2)]
+        for v in viewers:
+            v.start()
+        for v in viewers:
+            v.join(timeout=90)
+    for messages, _ in results:
+        assert messages[-1]["type"] == "error" and "broke off" in messages[-1]["error"], messages[-3:]
+        assert any(m["type"] == "frames" for m in messages)

@@ -28,9 +28,9 @@ def stream(source, output, segment_seconds, style, fps, seed, database, follow_s
     """Dance to SOURCE as it arrives: an audio file (played at real-time pace), '-' for standard input,
     or an http(s) URL of an audio stream. Motion is synthesised segment by segment (Xu et al.'s double
     buffer) and appended to the BVH as it goes."""
-    from .io.bvh_writer import BVHStreamWriter
+    from .live.output import CompleteBVHWriter
     from .live.runtime import LiveConfig, run_live
-    from .live.sources import AudioSource
+    from .live.sources import AudioSource, broke_off
 
     bvh_output(output)
 
@@ -43,11 +43,11 @@ def stream(source, output, segment_seconds, style, fps, seed, database, follow_s
 
     config = LiveConfig(segment_s=segment_seconds, style=style, fps=fps, seed=seed, database=database,
                         follow_signature=follow_signature)
-    with AudioSource(source, realtime=not fast) as src, BVHStreamWriter(output) as writer:
+    with AudioSource(source, realtime=not fast) as src, CompleteBVHWriter(output) as writer:
         summary = run_live(src, writer.append, config=config, on_report=report, realtime=not fast)
     if summary["frames"] == 0:
         raise InputError(f"{source}: the stream ended before a single segment could be danced")
-    broke_off = src.error.removeprefix(f"{source}: ") if src.network else ""
+    died = broke_off(src)
     click.echo(f"style     {summary['style']}, {summary['tempo_bpm']:.1f} bpm")
     click.echo(f"segments  {summary['segments']} of {segment_seconds:g} s, step median "
                f"{summary['step_s_median'] * 1e3:.1f} ms, max {summary['step_s_max'] * 1e3:.1f} ms, "
@@ -58,9 +58,8 @@ def stream(source, output, segment_seconds, style, fps, seed, database, follow_s
     if summary["motif_chi2"] is not None:
         click.echo(f"motifs    chi2 to the genre template {summary['motif_chi2']:.3f}")
     click.echo(f"wrote     {output} ({summary['frames']} frames at {fps:g} fps)")
-    if broke_off:  # the BVH is complete up to there; the user must still learn that the source died
-        raise InputError(f"{source}: the stream broke off after {src.heard_s:.1f} s of audio ({broke_off}); "
-                         f"{output} holds the dance up to then")
+    if died:  # the BVH is complete up to there; the user must still learn that the source died
+        raise InputError(f"{died}; {output} holds the dance up to then")
 
 
 @click.command()

@@ -128,6 +128,7 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
     next_cut = config.segment_s
     index = 0
     ended = False
+    stalled = False
     tempo = 0.0
     metre = 4
     try:
@@ -145,12 +146,17 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
                     tracker.push(chunk.samples)
                     heard_s += chunk.samples.size / source.sr
                     last_audio = now
-                elif realtime and now - last_audio > stall_s:
+                    stalled = False
+                elif realtime and (stalled or now - last_audio > stall_s):
+                    # Once stalled, silence goes in as the clock runs, so segments keep being cut on time.
+                    stalled = True
                     gap = now - last_audio
                     tracker.push(np.zeros(int(gap * source.sr), dtype=np.float32))
                     heard_s += gap
                     silence_s += gap
                     last_audio = now
+            while futures and futures[0].done():
+                futures.pop(0).result()  # a failed step (a full disk) ends the dance now, not at the source's end
             if not ended and heard_s < next_cut:
                 continue
             update = tracker.flush() if ended else tracker.update()

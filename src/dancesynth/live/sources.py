@@ -9,11 +9,14 @@ file at its native rate (``-re``).
 
 from __future__ import annotations
 
+import contextlib
 import queue
 import shutil
 import subprocess
+import sys
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,9 +26,15 @@ from ..errors import InputError
 
 SR = 22050
 CHUNK_S = 0.1
-# An http stream that sends nothing for this long is treated as ended (ffmpeg's own
-# reconnection has had its chance by then).
-HTTP_TIMEOUT_S = 15.0
+# An http stream that sends nothing for this long is treated as ended. A radio that stalls
+# for 20 s on an open connection and then resumes must survive it (the dancer bridges the stall).
+HTTP_TIMEOUT_S = 30.0
+# Standard input: junk before the container (a player's log line, a cut-off first page) is skipped
+# up to the first of these signatures, searched in the first SYNC_SEARCH_BYTES.
+CONTAINER_MAGICS = (b"OggS", b"RIFF", b"fLaC", b"ID3")
+SYNC_SEARCH_BYTES = 1 << 16
+# An Ogg page is at most 65,307 bytes: the last one is always in a tail this long.
+TAIL_BYTES = 1 << 17
 
 
 @dataclass(frozen=True)
@@ -35,7 +44,13 @@ class Chunk:
 
 
 class AudioSource:
-    """Mono float32 chunks from ffmpeg; ``read(timeout)`` returns a ``Chunk``, ``None`` on a stall, or raises StopIteration at the end."""
+    """Mono float32 chunks from ffmpeg; ``read(timeout)`` returns a ``Chunk``, ``None`` on a stall, or raises StopIteration at the end.
+
+    After the end, ``error`` is empty if the source ended as it should, else why it broke off:
+    ffmpeg's last error, a network stream whose reconnects failed, or a file or standard
+    input whose container ends mid-way (an Ogg stream without its last page, a WAV shorter
+    than its header says; an MP3 has no end mark, so a cut MP3 cannot be told from a short one).
+    """
 
     def __init__(self, spec: str, *, realtime: bool = True, sr: int = SR, chunk_s: float = CHUNK_S):
         self.spec = spec
@@ -44,6 +59,9 @@ class AudioSource:
         self._queue: queue.Queue = queue.Queue(maxsize=256)
         self._samples = 0
         self._done = False
+        self._closing = False
+        self._stderr: deque = deque(maxlen=20)  # ffmpeg's last lines; drained as it goes so it never blocks
+        self._ends: tuple[bytes, bytes, int] | None = None  # head, tail and size of the bytes fed (stdin)
         self.error = ""
         exe = shutil.which("ffmpeg")
         if exe is None:
@@ -53,23 +71,61 @@ class AudioSource:
         # Live inputs start decoding after 0.5 s of audio, not after ffmpeg's default 5 s of probing.
         quick_probe = ["-probesize", "65536", "-analyzeduration", "500000"]
         self.network = spec.startswith(("http://", "https://"))
+        self.path: Path | None = None
         if spec == "-":
             cmd = [exe, "-hide_banner", "-loglevel", "error", *quick_probe, "-i", "pipe:0"]
-            stdin = None  # ffmpeg reads our standard input
+            stdin = subprocess.PIPE  # fed by _pump_stdin, which skips junk before the container
         elif self.network:
             # -re: a whole file served over http plays at its pace too; a live stream sets its own.
+            # Reconnect only where the server can resume (HTTP ranges): ffmpeg's -reconnect_streamed
+            # asks a server without ranges for the file again and plays it from the start as new time.
             cmd += (["-re"] if realtime else []) + [
-                "-reconnect", "1", "-reconnect_streamed", "1", "-reconnect_delay_max", "4",
+                "-reconnect", "1", "-reconnect_delay_max", "4",
                 "-rw_timeout", str(int(HTTP_TIMEOUT_S * 1e6)), *quick_probe, "-i", spec]
         else:
-            path = Path(spec)
-            if not path.is_file():
+            self.path = Path(spec)
+            if not self.path.is_file():
                 raise InputError(f"{spec}: no such file (give an audio file, '-' for standard input, or an http(s) URL)")
-            cmd += (["-re"] if realtime else []) + ["-i", str(path)]
+            cmd += (["-re"] if realtime else []) + ["-i", str(self.path)]
         cmd += ["-vn", "-ac", "1", "-ar", str(sr), "-f", "s16le", "pipe:1"]
         self._proc = subprocess.Popen(cmd, stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        self._stderr_reader = threading.Thread(target=self._drain_stderr, daemon=True)
+        self._stderr_reader.start()
+        if spec == "-":
+            threading.Thread(target=self._pump_stdin, daemon=True).start()
         self._reader = threading.Thread(target=self._read_loop, daemon=True)
         self._reader.start()
+
+    def _drain_stderr(self) -> None:
+        for line in self._proc.stderr:
+            self._stderr.append(line.decode("utf-8", "replace").strip())
+
+    def _pump_stdin(self) -> None:
+        """Our standard input into ffmpeg's, from the first container signature on; keeps the first and
+        last bytes to check the container's end."""
+        dst = self._proc.stdin
+        head, tail, size = b"", b"", 0
+        try:
+            src = sys.stdin.buffer
+            while len(head) < SYNC_SEARCH_BYTES:
+                data = src.read1(SYNC_SEARCH_BYTES) if hasattr(src, "read1") else src.read(SYNC_SEARCH_BYTES)
+                if not data:
+                    break
+                head += data
+                if len(head) >= 4 and (_is_container(head) or _mp3_sync(head) or _first_sync(head) > 0):
+                    break
+            head = head[_first_sync(head):]
+            dst.write(head)
+            tail, size = head[-TAIL_BYTES:], len(head)
+            while data := (src.read1(1 << 16) if hasattr(src, "read1") else src.read(1 << 16)):
+                dst.write(data)
+                tail, size = (tail + data)[-TAIL_BYTES:], size + len(data)
+            self._ends = (head[:12], tail, size)
+        except (OSError, ValueError, AttributeError):  # ffmpeg stopped reading; or we have no standard input
+            pass
+        finally:
+            with contextlib.suppress(OSError):
+                dst.close()
 
     def _read_loop(self) -> None:
         out = self._proc.stdout
@@ -86,13 +142,28 @@ class AudioSource:
                     pending = pending[usable:]
         finally:
             self._proc.wait()
-            err = self._proc.stderr.read().decode("utf-8", "replace").strip() if self._proc.stderr else ""
-            # A network source that gives up after its reconnects still exits 0; its last word is then
-            # "URL: Input/output error" (a reconnect that succeeds leaves only "[http @ ...]" notes).
-            last = err.splitlines()[-1] if err else ""
-            if last and (self._proc.returncode not in (0, None) or (self.network and last.startswith(self.spec))):
-                self.error = last[:300]
+            if not self._closing:
+                self.error = self._why_it_ended()
             self._queue.put(None)
+
+    def _why_it_ended(self) -> str:
+        """Empty when the source ended as it should, else why not (see the class)."""
+        self._stderr_reader.join(timeout=2.0)  # ffmpeg has exited: its last line is on the way
+        last = self._stderr[-1] if self._stderr else ""
+        # A network source that gives up after its reconnects still exits 0; its last word is then
+        # "URL: Input/output error" (a reconnect that succeeds leaves only "[http @ ...]" notes).
+        if last and (self._proc.returncode != 0 or (self.network and last.startswith(self.spec))):
+            return last[:300]
+        if self.path is not None:
+            try:
+                with open(self.path, "rb") as fh:
+                    head = fh.read(12)
+                    size = fh.seek(0, 2)
+                    fh.seek(max(0, size - TAIL_BYTES))
+                    return _cut_off(head, fh.read(), size)
+            except OSError:  # the file went away meanwhile
+                return ""
+        return _cut_off(*self._ends) if self._ends else ""
 
     def read(self, timeout: float) -> Chunk | None:
         """The next chunk; ``None`` if nothing arrived within ``timeout`` s; StopIteration when the stream ended."""
@@ -115,6 +186,7 @@ class AudioSource:
         return self._samples / self.sr
 
     def close(self) -> None:
+        self._closing = True  # ffmpeg stopped by us has not failed
         if self._proc.poll() is None:
             self._proc.terminate()
             try:
@@ -128,6 +200,15 @@ class AudioSource:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def broke_off(source: AudioSource) -> str:
+    """After the end: '' if the source ended as it should, else a one-line account of how it broke off."""
+    if not source.error:
+        return ""
+    name = "standard input" if source.spec == "-" else source.spec
+    why = source.error.removeprefix(f"{source.spec}: ")
+    return f"{name}: the stream broke off after {source.heard_s:.1f} s of audio ({why})"
 
 
 def wait_for_audio(source: AudioSource, timeout_s: float) -> Chunk:
@@ -144,3 +225,40 @@ def wait_for_audio(source: AudioSource, timeout_s: float) -> Chunk:
             return chunk
         if time.monotonic() >= deadline:
             raise InputError(f"{source.spec}: no audio arrived within {timeout_s:g} s")
+
+
+def _is_container(head: bytes) -> bool:
+    return head.startswith(CONTAINER_MAGICS)
+
+
+def _mp3_sync(data: bytes) -> bool:
+    """An MPEG audio frame header (11 sync bits, a layer, a bitrate and a rate that exist) at the start."""
+    return (len(data) >= 3 and data[0] == 0xFF and data[1] & 0xE0 == 0xE0 and data[1] & 0x06 != 0
+            and data[2] & 0xF0 != 0xF0 and data[2] & 0x0C != 0x0C)
+
+
+def _first_sync(head: bytes) -> int:
+    """Where the stream starts: 0 if it starts with a container signature or an MP3 frame, else the
+    first container signature in ``head`` (0 if none: ffmpeg's own probing has its chance)."""
+    if _is_container(head[:4]) or _mp3_sync(head):
+        return 0
+    found = [i for i in (head.find(m) for m in CONTAINER_MAGICS) if i > 0]
+    return min(found, default=0)
+
+
+def _cut_off(head: bytes, tail: bytes, size: int) -> str:
+    """Why a container whose first bytes are ``head`` and last ``tail`` (of ``size``) ends mid-way, or ''."""
+    if head.startswith(b"OggS"):
+        at = tail.rfind(b"OggS")
+        if at < 0 or len(tail) < at + 27:
+            return "the Ogg stream is cut off mid-page"
+        n = tail[at + 26]
+        end = at + 27 + n + sum(tail[at + 27:at + 27 + n])
+        if len(tail) < at + 27 + n or end != len(tail) or not tail[at + 5] & 0x04:
+            return "the Ogg stream is cut off (its last page is missing)"
+    elif head.startswith(b"RIFF") and head[8:12] == b"WAVE":
+        declared = int.from_bytes(head[4:8], "little")
+        # 0 and 0xFFFFFFFF: a WAV written to a pipe, whose writer could not go back to fill in the size.
+        if declared not in (0, 0xFFFFFFFF) and size < declared + 8:
+            return f"the WAV stream is cut off ({size} of the {declared + 8} bytes its header announces)"
+    return ""

@@ -91,7 +91,7 @@ class Broadcast:
     def _run(self) -> None:
         from ..io.bvh_writer import bvh_parts
         from ..live.runtime import run_live
-        from ..live.sources import AudioSource
+        from ..live.sources import AudioSource, broke_off
 
         def post(fn, *args):
             if not self.stop.is_set():
@@ -112,7 +112,10 @@ class Broadcast:
             summary = run_live(_RelaySource(source, lambda pcm: post(self._publish_audio, pcm)), on_frames,
                                config=self.config, on_report=on_report, realtime=self.realtime, stop=self.stop)
             plain = {k: v for k, v in summary.items() if isinstance(v, (int, float, str, type(None)))}
-            final = {"type": "end", "summary": plain}
+            died = broke_off(source)
+            # A source that died is an error for every viewer, not an end they could take for the song's.
+            final = {"type": "error", "error": f"{died}; the dance stopped there"} if died else \
+                {"type": "end", "summary": plain}
         except DanceSynthError as exc:
             final = {"type": "error", "error": str(exc)}
         except Exception as exc:  # noqa: BLE001 - a viewer gets a message, never a traceback
