@@ -9,15 +9,16 @@ import click
 
 from .cli_support import Progress, bvh_output
 from .errors import InputError
+from .types import DEFAULT_FPS, SEGMENT_S
 
 
 @click.command()
 @click.argument("source")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=Path("live.bvh"),
               show_default=True, help="BVH file that grows as the dance goes (a valid BVH after every segment).")
-@click.option("--segment-seconds", type=float, default=5.0, show_default=True, help="Length of a segment.")
+@click.option("--segment-seconds", type=float, default=SEGMENT_S, show_default=True, help="Length of a segment.")
 @click.option("--style", help="Style or genre to dance (default: chosen from the first segment's tempo).")
-@click.option("--fps", type=float, default=30.0, show_default=True, help="Frame rate of the output.")
+@click.option("--fps", type=float, default=DEFAULT_FPS, show_default=True, help="Frame rate of the output.")
 @click.option("--seed", type=int, default=None, help="Vary the dance between runs.")
 @click.option("--database", type=click.Path(file_okay=False, path_type=Path),
               help="A database folder or a folder of BVH files (default: the bundled database).")

@@ -42,6 +42,7 @@ import numpy as np
 
 from ..beat_tracking import _dp, beat_local_score, metrical_level, tempo_curve
 from ..errors import InputError
+from ..types import FALLBACK_BPM
 from ..music.beats import ONSET_LATENCY_S, TRAILING_BEAT_FRACTION, _peak_envelope, refine_beat_frames
 from ..music.intensity import rms_db
 from ..music.metre import CHROMA_HOP, DEFAULT_BEATS_PER_BAR, FEATURE_SR, N_FEATURES, beat_features
@@ -115,7 +116,7 @@ class StreamingBeatTracker:
     ``latency_s``: how far behind the audio heard ``update()`` gives beats.
     """
 
-    def __init__(self, sr: int = ANALYSIS_SR, *, history_s: float = 16.0, fallback_bpm: float = 100.0,
+    def __init__(self, sr: int = ANALYSIS_SR, *, history_s: float = 16.0, fallback_bpm: float = FALLBACK_BPM,
                  latency_s: float = LATENCY_S):
         if sr != ANALYSIS_SR:
             raise InputError(f"the streaming beat tracker analyses audio at {ANALYSIS_SR} Hz, got sr={sr!r}; "

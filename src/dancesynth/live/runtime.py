@@ -26,18 +26,18 @@ from ..engines.beatgrid import choose_style
 from ..engines.graph.cache import load_graph
 from ..engines.graph.engine import EngineConfig, GraphEngine, MusicSegment
 from ..errors import InputError
-from ..motion.database import open_database
+from ..motion.database import MotionDatabase, open_database
 from ..motion.motifs import chi2
-from ..types import MotionClip, check_seed
+from ..types import DEFAULT_FPS, FALLBACK_BPM, SEGMENT_S, MotionClip, check_seed
 from .beats import StreamingBeatTracker
 from .sources import AudioSource, wait_for_audio
 
 
 @dataclass(frozen=True)
 class LiveConfig:
-    segment_s: float = 5.0
+    segment_s: float = SEGMENT_S
     style: str | None = None
-    fps: float = 30.0
+    fps: float = DEFAULT_FPS
     seed: int | None = None
     database: object = None            # a MotionDatabase, a path, or None for the bundled one
     stall_s: float | None = None       # feed silence after this long without audio (default: one segment)
@@ -109,7 +109,7 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
     """
     if not config.segment_s > 0.5:
         raise InputError(f"segment length must be more than 0.5 s, got {config.segment_s!r}")
-    db = open_database(config.database)
+    db = config.database if isinstance(config.database, MotionDatabase) else open_database(config.database)
     if config.style:
         db.styles_of(config.style)  # an unknown style fails now, not after the first segment
     stall_s = config.stall_s if config.stall_s is not None else config.segment_s
@@ -170,7 +170,7 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
                     continue  # not enough beats yet to start: keep listening
                 if beats.size == 0:
                     break
-                style, _ = choose_style(db, tempo if tempo > 0 else 100.0, config.style)
+                style, _ = choose_style(db, tempo if tempo > 0 else FALLBACK_BPM, config.style)
                 graph, _ = load_graph(style)
                 worker = _Worker(GraphEngine(style, graph, config.render, fps=config.fps,
                                              signature=_signature(config, db, style, graph)),

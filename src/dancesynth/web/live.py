@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import DanceSynthError
 from ..live.beats import LATENCY_S
-from ..types import MAX_SEED
+from ..types import MAX_SEED, SEGMENT_S
 from ..live.sources import SR
 
 # Motion for stream time t is ready one segment plus the beat tracker's latency after t
@@ -284,7 +284,7 @@ async def watch(ws, hub: LiveHub) -> None:
     q = ws.query_params
     url = q.get("url", "").strip()
     try:
-        segment_s = float(q.get("segment_s") or 5.0)
+        segment_s = float(q.get("segment_s") or SEGMENT_S)
     except ValueError:
         segment_s = None
     seed = parse_seed(q.get("seed"))
