@@ -129,12 +129,13 @@ def load_audio(path, *, sr: int | None = DEFAULT_SR, mono: bool = True,
     _check_not_truncated(info, n)
     # Again on what was decoded: a header may not state the length, or understate it.
     _check_duration(info.path, n / info.samplerate, max_duration_s, min_duration_s)
-    if not np.all(np.isfinite(y)):
-        raise InputError(f"{info.path}: the audio contains NaN or infinite samples, so the file is corrupt; "
-                         f"re-export or {_CONVERT_HINT}")
     out_sr = info.samplerate if sr is None else int(sr)
     if out_sr != info.samplerate:
         y = resample(y, info.samplerate, out_sr)
+    # After resampling: float samples near 3e38 are finite in the file but overflow the resampler.
+    if not np.all(np.isfinite(y)):
+        raise InputError(f"{info.path}: the audio contains NaN, infinite or absurdly large samples, so the file is "
+                         f"corrupt; re-export or {_CONVERT_HINT}")
     return np.ascontiguousarray(y, dtype=np.float32), out_sr
 
 

@@ -50,6 +50,8 @@ _CHANNEL_NAMES = {c.lower(): c for c in POSITION_CHANNELS + ROTATION_CHANNELS}
 FPS_RANGE = (1.0, 1000.0)
 MAX_VALUE = 1e6  # any OFFSET or channel value, in the file's units (cm or m; degrees)
 MAX_JOINTS = 500  # a 20,000-joint chain took 11 s to read and a 1,000-joint one could not be written
+# 500 joints take ~100 bytes each; a HIERARCHY far longer is refused before it is tokenised (15 MB took 3 s).
+MAX_HEADER_CHARS = 2_000_000
 _KEYWORDS = {"HIERARCHY", "ROOT", "JOINT", "END", "OFFSET", "CHANNELS", "MOTION", "{", "}"}
 _TOKEN = re.compile(r"[{}]|[^\s{}]+")
 _MOTION_LINE = re.compile(r"^[ \t]*MOTION[ \t]*$", re.MULTILINE)
@@ -122,6 +124,10 @@ def _parse(text: str, name: str) -> _Raw:
         raise InputError(f"{name}: not a BVH file (it looks binary); BVH is a text format starting with HIERARCHY")
     m = _MOTION_LINE.search(text)
     header = text if m is None else text[: m.start()]
+    if len(header) > MAX_HEADER_CHARS:
+        raise InputError(f"{name}: the HIERARCHY section is {len(header) / 1e6:.1f} MB long, more than a skeleton "
+                         f"of at most {MAX_JOINTS} joints needs ({MAX_HEADER_CHARS / 1e6:g} MB); the file is corrupt "
+                         "or not a character")
     raw = _Raw()
     _parse_hierarchy(header, name, raw)
     if m is None:

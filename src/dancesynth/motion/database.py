@@ -19,6 +19,7 @@ import hashlib
 import json
 import tomllib
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable
@@ -191,7 +192,11 @@ def collect_sources(folder: Path, manifest: Path | None = None) -> list[tuple[st
     if not folder.is_dir():
         raise InputError(f"database folder {folder} does not exist")
     manifest = Path(manifest) if manifest else folder / MANIFEST_NAME
-    files = sorted(p for p in folder.rglob("*") if p.suffix.lower() == ".bvh" and p.is_file())
+    try:
+        files = sorted(p for p in folder.rglob("*") if p.suffix.lower() == ".bvh" and p.is_file())
+    except OSError as exc:  # a folder that changes or cannot be listed while we walk it (/proc, a lost mount)
+        raise InputError(f"cannot list the files of {folder} ({exc.strerror or exc}); give a folder of BVH "
+                         "files or a saved database") from None
     if manifest.is_file() or manifest != folder / MANIFEST_NAME:
         try:
             genres = tomllib.loads(manifest.read_text())["genres"]
@@ -350,6 +355,48 @@ def _skeleton_from_json(d: dict) -> Skeleton:
                     {int(j): np.array(o) for j, o in d["end_sites"].items()})
 
 
+def _style_from_stored(name: str, meta: dict, arr: dict, fingerprint: str) -> Style:
+    """A ``Style`` from its database.json entry and .npz arrays, every shape and range checked
+    (a damaged or hand-edited database must be an error, not NaN motion or an IndexError later)."""
+    sk = _skeleton_from_json(meta["skeleton"])
+    n_j = len(sk.names)
+    parents = np.asarray(sk.parents)
+    if (parents.shape != (n_j,) or n_j == 0 or parents[0] != -1 or np.any(parents[1:] < 0)
+            or np.any(parents[1:] >= np.arange(1, n_j)) or sk.offsets.shape != (n_j, 3)
+            or not np.all(np.isfinite(sk.offsets)) or len(sk.channels) != n_j or len(set(sk.names)) != n_j):
+        raise ValueError("the skeleton's names, parents, offsets or channels disagree")
+    fps = float(meta["fps"])
+    if not 1.0 <= fps <= 1000.0:
+        raise ValueError(f"frame rate {fps}")
+    root_pos, moving, static = arr["root_pos"], arr["moving"], arr["static_rot"]
+    n_f = len(root_pos)
+    clips, sources = tuple(meta["clips"]), tuple(meta["sources"])
+    starts, beats = arr["clip_starts"], arr["beat_frames"]
+    shapes_ok = (root_pos.shape == (n_f, 3) and moving.shape == (n_j,) and moving.dtype == bool
+                 and static.shape == (n_j, 4) and arr["rot_q"].shape == (n_f, int(moving.sum()), 4)
+                 and arr["contacts"].shape == (n_f, 2) and arr["energy"].shape == (n_f,)
+                 and starts.shape == (len(clips) + 1,) and len(sources) == len(clips)
+                 and arr["clip_tempo_bpm"].shape == (len(clips),) and beats.ndim == 1)
+    if not shapes_ok or not clips:
+        raise ValueError("array shapes disagree with each other or with the clip list")
+    if starts.dtype.kind not in "iu" or beats.dtype.kind not in "iu" or arr["rot_q"].dtype != np.int16:
+        raise ValueError("frame indices or rotations of the wrong type")
+    if starts[0] != 0 or starts[-1] != n_f or np.any(np.diff(starts) <= 0) or np.any((beats < 0) | (beats >= n_f)):
+        raise ValueError("clip ranges or beats outside the frames")
+    rot = np.repeat(static[None].astype(np.float32), n_f, axis=0)
+    rot[:, moving] = arr["rot_q"].astype(np.float32) / 32767.0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rot /= np.linalg.norm(rot, axis=-1, keepdims=True)
+    for what, a in (("rotations", rot), ("root positions", root_pos), ("energies", arr["energy"]),
+                    ("clip tempi", arr["clip_tempo_bpm"])):
+        if a.dtype.kind != "f" or not np.all(np.isfinite(a)):
+            raise ValueError(f"{what} are not finite numbers")
+    return Style(name=name, genre=str(meta["genre"]), skeleton=sk, fps=fps, clip_names=clips, clip_sources=sources,
+                 clip_starts=starts, local_rot=rot, root_pos=root_pos, contacts=arr["contacts"].astype(bool),
+                 energy=arr["energy"], beat_frames=beats, clip_tempo_bpm=arr["clip_tempo_bpm"],
+                 fingerprint=fingerprint)
+
+
 def save_database(db: MotionDatabase, folder: Path) -> None:
     """Write ``db`` to ``folder`` (created if needed) in the compact on-disk form."""
     folder = Path(folder)
@@ -382,27 +429,28 @@ def load_database(folder: Path) -> MotionDatabase:
         raise InputError(f"{folder} is not a dancesynth database (no database.json)") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ModelError(f"{folder / 'database.json'} is corrupt ({exc}); rebuild the database") from None
-    if index.get("format") != FORMAT_VERSION:
+    if not isinstance(index, dict) or index.get("format") != FORMAT_VERSION:
         raise ModelError(f"{folder} was written by another dancesynth version; rebuild it with 'dancesynth build-db'")
+    if not isinstance(index.get("styles"), dict) or not index["styles"]:
+        raise ModelError(f"{folder / 'database.json'} lists no styles; rebuild the database")
     styles = {}
     for name, meta in index["styles"].items():
+        # The name becomes a file name: "../x" must not read beside the folder.
+        if not name or name in (".", "..") or any(c in name for c in "/\\\x00"):
+            raise ModelError(f"{folder / 'database.json'}: style name {name[:40]!r} is not a file name; "
+                             "rebuild the database")
         path = folder / f"{name}.npz"
         try:
             raw = path.read_bytes()
             with np.load(path) as z:
                 arr = {k: z[k] for k in z.files}
-        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
             raise ModelError(f"{path} is missing or corrupt ({exc}); rebuild the database") from None
-        sk = _skeleton_from_json(meta["skeleton"])
-        rot = np.repeat(arr["static_rot"][None], len(arr["root_pos"]), axis=0)
-        rot[:, arr["moving"]] = arr["rot_q"].astype(np.float32) / 32767.0
-        rot /= np.linalg.norm(rot, axis=-1, keepdims=True)
-        styles[name] = Style(
-            name=name, genre=meta["genre"], skeleton=sk, fps=float(meta["fps"]),
-            clip_names=tuple(meta["clips"]), clip_sources=tuple(meta["sources"]),
-            clip_starts=arr["clip_starts"], local_rot=rot, root_pos=arr["root_pos"],
-            contacts=arr["contacts"], energy=arr["energy"], beat_frames=arr["beat_frames"],
-            clip_tempo_bpm=arr["clip_tempo_bpm"], fingerprint=hashlib.blake2b(raw, digest_size=16).hexdigest())
+        try:
+            styles[name] = _style_from_stored(name, meta, arr, hashlib.blake2b(raw, digest_size=16).hexdigest())
+        except (KeyError, TypeError, ValueError, AttributeError, IndexError, InputError) as exc:
+            why = f"{type(exc).__name__}: {exc}".splitlines()[0][:200]
+            raise ModelError(f"{path} or its entry in database.json is corrupt ({why}); rebuild the database") from None
     return MotionDatabase(styles, source=str(folder), notes=index.get("notes", {}))
 
 

@@ -122,7 +122,9 @@ def _coerce(name: str, value, where: str) -> float:
         number = float(value)
     except ValueError:
         raise InputError(f"{where}: parameter {name} must be a number, got {value!r}") from None
-    return int(number) if name == "max_segment_notes" and number == int(number) else number
+    # is_integer, not number == int(number): int() of nan or inf raises (a config of "nan" or "inf"
+    # would be an internal error); __post_init__ then refuses what is not finite.
+    return int(number) if name == "max_segment_notes" and number.is_integer() else number
 
 
 def from_style(style: str = "default", base: ProceduralConfig | None = None) -> ProceduralConfig:
