@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 import re
 import shutil
 import tempfile
@@ -26,6 +27,7 @@ from pathlib import Path
 
 
 from starlette.applications import Starlette
+from starlette.background import BackgroundTask
 from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import UploadFile
 from starlette.exceptions import HTTPException
@@ -105,15 +107,20 @@ class UploadStore:
             (self.dir / key).unlink(missing_ok=True)
 
     def path(self, key: str) -> Path | None:
+        """Where a danced upload is, to be sent; ``served`` once it has been (not before: it could go meanwhile)."""
         if not _UPLOAD_ID.match(key):
             return None
         with self._lock:
             entry = self._files.get(key)
             if entry is None or entry["done"] is None:
                 return None
-            entry["served"] = True
         p = self.dir / key
         return p if p.is_file() else None
+
+    def served(self, key: str) -> None:
+        with self._lock:
+            if key in self._files:
+                self._files[key]["served"] = True
 
     def _prune(self, keep: int) -> None:
         now = time.time()
@@ -128,12 +135,44 @@ class UploadStore:
         shutil.rmtree(self.dir, ignore_errors=True)
 
 
+class DanceQueue:
+    """At most ``workers`` dances at once and ``max_waiting`` more waiting for a turn, each in a worker thread.
+
+    Beyond that the server is busy: it says so, with how long to wait (``retry_after_s``), instead of
+    holding ever more requests. The running mean of a dance's duration makes that estimate.
+    """
+
+    def __init__(self, workers: int, max_waiting: int):
+        self.workers, self.max_waiting = workers, max_waiting
+        self.queued = 0      # dances waiting or running
+        self.mean_s = 2.0    # a first guess, replaced as dances finish
+        self._turns = asyncio.Semaphore(workers)
+
+    def full(self) -> bool:
+        return self.queued >= self.workers + self.max_waiting
+
+    def retry_after_s(self) -> int:
+        """Whole seconds until the dances queued now are done, from 1 to 60."""
+        return min(60, max(1, math.ceil(self.queued * self.mean_s / self.workers)))
+
+    async def run(self, fn, *args):
+        self.queued += 1
+        try:
+            async with self._turns:
+                t0 = time.monotonic()
+                result = await run_in_threadpool(fn, *args)
+                self.mean_s = 0.8 * self.mean_s + 0.2 * (time.monotonic() - t0)
+                return result
+        finally:
+            self.queued -= 1
+
+
 class _TooLarge(Exception):
     pass
 
 
-def _error(status: int, message: str) -> JSONResponse:
-    return JSONResponse({"error": message}, status_code=status)
+def _error(status: int, message: str, headers: dict | None = None) -> JSONResponse:
+    return JSONResponse({"error": message}, status_code=status, headers=headers)
 
 
 def _limited(request: Request, max_bytes: int) -> Request:
@@ -153,13 +192,21 @@ def _limited(request: Request, max_bytes: int) -> Request:
     return Request(request.scope, counting_receive)
 
 
+MAX_VIEWER_LAG_S = 20.0  # a live viewer further behind the stream than this is let go of
+PING_EVERY_S = 5.0   # WebSocket keepalive (uvicorn's default: 20 s, answered within 20 s)
+SHUTDOWN_S = 5.0     # on Ctrl-C / SIGTERM, wait this long for open connections (uvicorn's default: forever)
+
+
 def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dances: int = 2,
-               max_stored_uploads: int = 8, max_live_streams: int = 2,
-               max_viewer_lag_s: float = 20.0, live_realtime: bool = True) -> Starlette:
+               max_waiting_dances: int = 16, max_stored_uploads: int = 8, max_live_streams: int = 2,
+               max_viewer_lag_s: float = MAX_VIEWER_LAG_S, live_realtime: bool = True) -> Starlette:
     """The web app: the page, the bundled songs, and ``POST /api/dance``.
 
     ``database`` is passed to ``dancesynth.dance`` (a folder, a ``MotionDatabase`` or
     None for the bundled one); uploads larger than ``max_upload_mb`` are refused with 413.
+    ``max_concurrent_dances`` dance at once and ``max_waiting_dances`` more wait; beyond
+    that, or with ``max_stored_uploads`` uploads kept, a dance is refused with 503 and a
+    Retry-After (the page waits that long and asks again).
     """
     from ..api import list_styles
     from ..motion.database import MotionDatabase, open_database
@@ -169,7 +216,7 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
     max_bytes = int(max_upload_mb * 1024 * 1024)
     store = UploadStore(max_files=max_stored_uploads)
     songs = {s["name"]: s for s in bundled_songs()}
-    slots = asyncio.Semaphore(max_concurrent_dances)
+    dances = DanceQueue(max_concurrent_dances, max_waiting_dances)
     hub = LiveHub(database, max_streams=max_live_streams, max_lag_s=max_viewer_lag_s, realtime=live_realtime)
     styles_cache: list = []
 
@@ -196,7 +243,13 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
         path = store.path(key)
         if path is None:
             return _error(404, "no such upload (uploads are kept for a while only; dance it again)")
-        return FileResponse(path, media_type=_MEDIA_TYPES.get(path.suffix.lower(), "application/octet-stream"))
+        return FileResponse(path, media_type=_MEDIA_TYPES.get(path.suffix.lower(), "application/octet-stream"),
+                            background=BackgroundTask(store.served, key))
+
+    def busy(what: str) -> Response:
+        wait = dances.retry_after_s()
+        return _error(503, f"the server is busy with {what}; try again in {wait} s",
+                      headers={"Retry-After": str(wait)})
 
     async def api_dance(request: Request) -> Response:
         length = request.headers.get("content-length")
@@ -211,30 +264,32 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
                                "'audio' (a file) or 'song' (a bundled song name)")
         upload_key, song_path, shown = None, None, ""
         try:
+            problem = _form_problem(form)
+            if problem:
+                return _error(400, problem)
             style = _text(form, "style") or None
             seed_text = _text(form, "seed")
             seed = parse_seed(seed_text)
             if seed is False:
                 return _error(400, f"seed {seed_text!r} must be a whole number from 0 to {MAX_SEED} (e.g. 7) or empty")
-            audio = form.get("audio")
-            song_name = _text(form, "song")
-            if isinstance(audio, UploadFile) and (audio.filename or audio.size):
+            audio, song_name = _upload(form), _text(form, "song")
+            if audio is None and not song_name:
+                return _error(400, "send an audio file ('audio') or the name of a bundled song ('song')")
+            if audio is None and song_name not in songs:
+                return _error(400, f"no bundled song named {song_name!r}; pick one of /api/songs")
+            if dances.full():
+                return busy(f"{dances.queued} dances")
+            if audio is not None:
                 stored = store.new_path(audio.filename)
-                if stored is None:
-                    return _error(503, f"the server is busy with {store.max_files} uploaded songs; try again in a "
-                                       "minute, or dance a bundled song")
+                if stored is None:  # every place holds a song waiting for its dance or to be played
+                    return busy(f"{store.max_files} uploaded songs")
                 upload_key, song_path = stored
                 shown = Path(audio.filename or "upload").name
                 await run_in_threadpool(_save_upload, audio, song_path)
                 audio_url = f"/api/uploads/{upload_key}"
-            elif song_name:
-                if song_name not in songs:
-                    return _error(400, f"no bundled song named {song_name!r}; pick one of /api/songs")
-                song_path, audio_url, shown = MUSIC_DIR / song_name, songs[song_name]["url"], song_name
             else:
-                return _error(400, "send an audio file ('audio') or the name of a bundled song ('song')")
-            async with slots:
-                result = await run_in_threadpool(_dance_json, song_path, style, seed, database)
+                song_path, audio_url, shown = MUSIC_DIR / song_name, songs[song_name]["url"], song_name
+            result = await dances.run(_dance_json, song_path, style, seed, database)
         except DanceSynthError as exc:
             if upload_key:
                 store.discard(upload_key)
@@ -290,6 +345,30 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
     return app
 
 
+_FIELDS = {"audio": "a file", "song": "text", "style": "text", "seed": "text"}
+
+
+def _form_problem(form) -> str:
+    """What is wrong with the form's fields (unknown, repeated, a file for text or text for a file), or ''."""
+    for key in dict.fromkeys(form.keys()):
+        values = form.getlist(key)
+        if key not in _FIELDS:
+            return f"unknown field {key[:40]!r}; the form takes {', '.join(_FIELDS)}"
+        if len(values) > 1:
+            return f"the field {key!r} is given {len(values)} times; give it once"
+        if isinstance(values[0], UploadFile) != (_FIELDS[key] == "a file"):
+            return f"the field {key!r} must be {_FIELDS[key]}"
+    if _upload(form) is not None and _text(form, "song"):
+        return "send an audio file ('audio') or the name of a bundled song ('song'), not both"
+    return ""
+
+
+def _upload(form) -> UploadFile | None:
+    """The uploaded song, if one was chosen (a form's empty file field sends no name and no bytes)."""
+    audio = form.get("audio")
+    return audio if isinstance(audio, UploadFile) and (audio.filename or audio.size) else None
+
+
 def _text(form, key: str) -> str:
     value = form.get(key)
     return value.strip() if isinstance(value, str) else ""
@@ -306,15 +385,22 @@ def _dance_json(song_path: Path, style: str | None, seed: int | None, database) 
     from ..io.bvh_writer import format_bvh
 
     clip = dance(song_path, style=style, seed=seed, database=database)
-    s = clip.meta["summary"]
+    s = clip.provenance.summary
     return {"bvh": format_bvh(clip), "fps": clip.fps, "frames": clip.n_frames,
             "duration_s": float(s["duration_s"]), "tempo_bpm": float(s["tempo_bpm"]),
-            "beats": [round(float(t), 4) for t in clip.meta["music_beat_times_s"]],
+            "beats": [round(float(t), 4) for t in clip.provenance.music_beat_times_s],
             "style": s["style"], "default_tempo": bool(s["default_tempo"])}
 
 
+
 def serve(host: str = "127.0.0.1", port: int = 8000, *, log_level: str = "info", **app_options) -> None:
-    """Run the web app with uvicorn until interrupted (Ctrl-C); 127.0.0.1 (this machine only) by default."""
+    """Run the web app with uvicorn until interrupted (Ctrl-C, SIGTERM); 127.0.0.1 (this machine only) by default.
+
+    A live viewer that stops reading is let go of within ``max_viewer_lag_s`` and a few seconds: on a
+    real-time stream the kernel's socket buffers hold minutes of it before a send would block (and
+    the viewer be dropped with a message), so the WebSocket keepalive does it: a ping every
+    ``PING_EVERY_S`` that must be answered within the lag allowed. Shutting down waits for open
+    connections at most ``SHUTDOWN_S``."""
     import socket
 
     import uvicorn
@@ -325,4 +411,6 @@ def serve(host: str = "127.0.0.1", port: int = 8000, *, log_level: str = "info",
     except OSError as exc:
         raise InputError(f"cannot listen on {host}:{port}: {exc.strerror or exc}; pick another --port "
                          "or --host") from None
-    uvicorn.run(create_app(**app_options), host=host, port=port, log_level=log_level)
+    lag_s = app_options.get("max_viewer_lag_s", MAX_VIEWER_LAG_S)
+    uvicorn.run(create_app(**app_options), host=host, port=port, log_level=log_level, ws_ping_interval=PING_EVERY_S,
+                ws_ping_timeout=lag_s, timeout_graceful_shutdown=SHUTDOWN_S)

@@ -9,7 +9,7 @@ const $ = (id) => document.getElementById(id);
 const audio = $('audio');
 const statusLine = $('status');
 // What the page is doing, for people debugging it and for the browser test.
-const state = (window.dancesynth = { state: 'loading', error: null, timings: {}, frames: 0, beats: 0 });
+const state = (window.dancesynth = { state: 'loading', error: null, timings: {}, frames: 0, beats: 0, retries: 0 });
 
 function setStatus(text, isError = false) {
 	statusLine.textContent = text;
@@ -163,12 +163,34 @@ function frame() {
 }
 
 // ---- controls -------------------------------------------------------------------------
-async function getJSON(url, options) {
-	const response = await fetch(url, options);
+async function readJSON(response) {
 	let body = null;
 	try { body = await response.json(); } catch { body = null; }
 	if (!response.ok) throw new Error((body && body.error) || `${response.status} ${response.statusText}`);
 	return body;
+}
+
+async function getJSON(url, options) {
+	return readJSON(await fetch(url, options));
+}
+
+// A busy server answers 503 (or 429) with Retry-After: wait that long, plus a little so that
+// pages told the same do not all come back at once, and ask again, for at most RETRY_FOR_MS.
+const RETRY_FOR_MS = 300000;
+
+async function postDance(form) {
+	const giveUp = performance.now() + RETRY_FOR_MS;
+	for (let tries = 1; ; tries++) {
+		const response = await fetch('/api/dance', { method: 'POST', body: form });
+		const wait = Number(response.headers.get('Retry-After')) * 1000 * (1 + 0.25 * Math.random());
+		if (![429, 503].includes(response.status) || !(wait > 0) || performance.now() + wait > giveUp) {
+			return readJSON(response);
+		}
+		state.retries = tries;
+		setStatus(`The server is busy; asking again in ${Math.round(wait / 1000)} s…`);
+		await new Promise((resolve) => setTimeout(resolve, wait));
+		setStatus('Listening to the music and choreographing…');
+	}
 }
 
 async function loadChoices() {
@@ -196,7 +218,7 @@ async function requestDance(event) {
 	setStatus('Listening to the music and choreographing…');
 	const t0 = performance.now();
 	try {
-		const result = await getJSON('/api/dance', { method: 'POST', body: form });
+		const result = await postDance(form);
 		state.timings.dance_ms = performance.now() - t0;
 		stopLive();
 		if (dance) scene.remove(dance.group);
