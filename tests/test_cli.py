@@ -255,3 +255,21 @@ def test_ctrl_c_while_the_command_starts_says_interrupted_without_a_traceback():
         assert proc.returncode in (0, 130, -signal.SIGINT), (delay, proc.returncode, err)
         if proc.returncode == 130:
             assert err.strip().splitlines()[-1] == "interrupted"
+
+
+def test_the_last_fuzzed_option_failures_are_one_line_errors(tmp_path):
+    """Issue 13, found by tests/fuzz/cli_target.py: each of these ended in exit 70."""
+    song = tmp_path / "song.wav"
+    sf.write(song, 0.2 * np.sin(2 * np.pi * 220 * np.arange(5 * 22050) / 22050), 22050)
+    out = tmp_path / "o.bvh"
+    for fps in ("0", "-0", "inf", "nan", "1e9"):
+        assert_clean_failure(cli("stream", song, "-o", out, "--fast", "-q", "--fps", fps), out, "frame rate")
+    unwritable = Path("/proc/o.bvh")  # its folder exists, but no file can be made there
+    proc = cli("stream", song, "-o", unwritable, "--fast", "-q")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr and str(unwritable) in proc.stderr
+    proc = cli("bench", "--quick", "--out", "/proc/x")
+    assert proc.returncode == 2 and "cannot write /proc/x" in proc.stderr
+    for minutes in ("1e-300", "0", "nan", "inf"):
+        proc = cli("train", "--config", "tiny", "--minutes", minutes, "--out", tmp_path / "w.pt", "-q")
+        assert proc.returncode == 2 and "--minutes" in proc.stderr, proc.stderr
+    assert not (tmp_path / "w.pt").exists()

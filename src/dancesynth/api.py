@@ -16,7 +16,8 @@ from .engines.graph.meta_graph import GraphConfig
 from .errors import InputError
 from .motion.database import MotionDatabase, open_database
 from .provenance import EngineRun, make_provenance
-from .types import DEFAULT_FPS, FALLBACK_BPM, MAX_SONG_S, SEGMENT_S, MotionClip, MusicFeatures, check_seed
+from .types import (DEFAULT_FPS, FALLBACK_BPM, MAX_SONG_S, SEGMENT_S, MotionClip, MusicFeatures, check_fps,
+                    check_seed)
 
 ENGINES = ("streaming", "global", "neural", "choreography")
 
@@ -62,8 +63,7 @@ class DanceConfig:
         if self.lookahead_s > 0 and self.engine != "streaming":
             raise InputError(f"--lookahead is for the streaming engine, not '{self.engine}' (the global DP sees the "
                              "whole song already)")
-        if not 1 <= self.fps <= 240:
-            raise InputError(f"frame rate {self.fps} is out of range: use 1 to 240 fps")
+        check_fps(self.fps)
         check_seed(self.seed)
         if not self.max_duration_s > 0:  # NaN too: it would switch the limit off
             raise InputError(f"the song length limit must be a positive number of seconds, got {self.max_duration_s}")

@@ -338,10 +338,16 @@ def bench(quick, out_dir):
 
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError(f"--out {out_dir} is a file; give a folder for bench.json")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot write {out_dir}: {exc.strerror or exc}") from None
     result = run_bench(quick=quick, out_dir=out_dir, progress=lambda msg: click.echo(msg, err=True))
     click.echo(format_bench(result))
     click.echo(f"wrote {out_dir / 'bench.json'}")
+
+
+MIN_TRAIN_MINUTES, MAX_TRAIN_MINUTES = 0.1, 7 * 24 * 60.0
 
 
 @cli.command()
@@ -360,8 +366,9 @@ def train(style, config_name, device, minutes, out_dir, seed, database, quiet):
     """Train the learned pose generator of '--engine neural' (Aristidou et al. §4) on one genre."""
     from .engines.neural.train import train as run_training
 
-    if minutes is not None and not minutes > 0:
-        raise InputError("--minutes must be positive")
+    if minutes is not None and not MIN_TRAIN_MINUTES <= minutes <= MAX_TRAIN_MINUTES:  # NaN too
+        raise InputError(f"--minutes must be from {MIN_TRAIN_MINUTES:g} (a few steps) to {MAX_TRAIN_MINUTES:g} "
+                         f"(a week), got {minutes:g}")
     bar = None
     if not quiet and sys.stderr.isatty():
         from tqdm import tqdm

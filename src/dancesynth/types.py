@@ -31,6 +31,17 @@ def check_seed(seed) -> None:
                              or not 0 <= int(seed) <= MAX_SEED):
         raise InputError(f"seed {seed!r} must be a whole number from 0 to {MAX_SEED} (or left out)")
 
+
+DANCE_FPS_RANGE = (1.0, 240.0)     # frame rates a dance can be made at
+
+
+def check_fps(fps) -> None:
+    """A dance's frame rate is a number within ``DANCE_FPS_RANGE`` (NaN and infinity are not)."""
+    lo, hi = DANCE_FPS_RANGE
+    if isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating)) or not lo <= fps <= hi:
+        raise InputError(f"frame rate {fps} is out of range: use {lo:g} to {hi:g} fps")
+
+
 POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
 
 

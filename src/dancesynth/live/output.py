@@ -25,8 +25,9 @@ class CompleteBVHWriter(BVHStreamWriter):
             super().append(clip)
             self._complete_bytes = os.fstat(self._fh.fileno()).st_size if self._fh else 0
         except OSError as exc:
-            with contextlib.suppress(OSError):
-                self._fh.close()  # its buffer cannot be written either; the cut below drops any part of it
+            if self._fh is not None:  # (None: the file could not even be opened)
+                with contextlib.suppress(OSError):
+                    self._fh.close()  # its buffer cannot be written either; the cut below drops any part of it
             self._fh = None
             if self._complete_bytes:
                 os.truncate(self.path, self._complete_bytes)

@@ -28,7 +28,7 @@ from ..engines.graph.engine import EngineConfig, GraphEngine, MusicSegment
 from ..errors import InputError
 from ..motion.database import MotionDatabase, open_database
 from ..motion.motifs import chi2
-from ..types import DEFAULT_FPS, FALLBACK_BPM, SEGMENT_S, MotionClip, check_seed
+from ..types import DEFAULT_FPS, FALLBACK_BPM, SEGMENT_S, MotionClip, check_fps, check_seed
 from .beats import StreamingBeatTracker
 from .sources import AudioSource, wait_for_audio
 
@@ -47,6 +47,7 @@ class LiveConfig:
 
     def __post_init__(self):
         check_seed(self.seed)
+        check_fps(self.fps)
 
 
 @dataclass(frozen=True)
