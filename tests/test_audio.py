@@ -10,6 +10,7 @@ import pytest
 import soundfile as sf
 
 import signals
+from conftest import BUNDLED_MUSIC
 from dancesynth.errors import InputError
 from dancesynth.io.audio import audio_duration_s, load_audio, probe_audio
 
@@ -210,3 +211,20 @@ def test_bad_sample_rate(tmp_path):
     path = signals.write(tmp_path / "tone.wav", signals.sine(440, 5.0), 22050)
     with pytest.raises(InputError):
         load_audio(path, sr=0)
+
+
+def test_a_damaged_mp3_is_decoded_without_the_decoders_notes_on_stderr(tmp_path, capfd):
+    """Issue 13: libsndfile's mpg123 printed "Note: Trying to resync..." straight onto the user's terminal."""
+    mp3 = tmp_path / "song.mp3"
+    subprocess.run(["ffmpeg", "-loglevel", "error", "-y", "-t", "8", "-i",
+                    str(BUNDLED_MUSIC / "Kevin_MacLeod_-_Vibe_Ace.ogg"), str(mp3)], check=True)
+    data = bytearray(mp3.read_bytes())
+    rng = np.random.default_rng(1)
+    for at in rng.integers(2000, len(data) - 50, 40):
+        data[at:at + 50] = bytes(50)          # 40 holes in the frames
+    mp3.write_bytes(bytes(data))
+    capfd.readouterr()
+    y, sr = load_audio(mp3)
+    assert len(y) / sr == pytest.approx(8.0, abs=0.3) and np.all(np.isfinite(y))
+    err = capfd.readouterr().err
+    assert "resync" not in err.lower() and "mpg123" not in err, err

@@ -27,9 +27,11 @@ import numpy as np
 import soundfile as sf
 
 from ..errors import InputError
+from ..types import MAX_SONG_S
 
 DEFAULT_SR = 22050
-DEFAULT_MAX_DURATION_S = 900.0
+DEFAULT_MAX_DURATION_S = MAX_SONG_S
+_NOISY_FORMATS = {"MP3", "MPEG"}
 DEFAULT_MIN_DURATION_S = 4.0
 
 # Formats a user can always convert to; named in every "cannot decode" message.
@@ -84,7 +86,9 @@ def probe_audio(path) -> AudioInfo:
         # libsndfile does not know the format (its message then misleadingly says
         # "file does not exist"); ffmpeg knows far more containers and codecs.
         info = None
-    if info is not None and info.samplerate > 0 and info.channels > 0:
+    # MP3 goes to ffmpeg: libsndfile's mpg123 prints its notes on a damaged frame ("Trying to resync...")
+    # straight to the process's stderr, where ffmpeg's are ours to keep.
+    if info is not None and info.samplerate > 0 and info.channels > 0 and info.format not in _NOISY_FORMATS:
         result = AudioInfo(path, int(info.samplerate), int(info.channels), int(info.frames),
                            float(info.frames) / info.samplerate, str(info.format), "soundfile")
     else:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -43,3 +44,31 @@ def atomic_output(path, mode: str = "w", **open_kwargs):
     """Open a temporary file next to ``path``; move it into place only if the block succeeds."""
     with atomic_path(path) as tmp, open(tmp, mode, **open_kwargs) as fh:
         yield fh
+
+
+@contextlib.contextmanager
+def atomic_folder(path):
+    """A temporary folder next to ``path`` to write a set of files into; they are moved into ``path``
+    (created, or its files of the same names replaced) only if the block succeeds, removed otherwise."""
+    path = Path(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    if path.exists() and not path.is_dir():
+        raise InputError(f"cannot write {path}: it is a file; give a folder")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".part", dir=parent))
+    except OSError as exc:
+        raise InputError(f"cannot write {path}: {exc.strerror or exc}") from None
+    try:
+        yield tmp
+        if path.is_dir():
+            for f in tmp.iterdir():
+                os.replace(f, path / f.name)
+            tmp.rmdir()
+        else:
+            os.rename(tmp, path)
+    except BaseException as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if isinstance(exc, OSError) and exc.strerror:  # a full disk, a quota, a folder gone read-only
+            raise InputError(f"cannot write {path}: {exc.strerror}; nothing was written") from None
+        raise

@@ -27,7 +27,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from ..errors import InputError, ModelError
-from ..io.files import atomic_output
+from ..io.files import atomic_folder
 from ..kinematics import fk
 from ..timebase import bpm_from_intervals
 from ..types import MotionClip, Skeleton
@@ -398,16 +398,20 @@ def _style_from_stored(name: str, meta: dict, arr: dict, fingerprint: str) -> St
 
 
 def save_database(db: MotionDatabase, folder: Path) -> None:
-    """Write ``db`` to ``folder`` (created if needed) in the compact on-disk form."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+    """Write ``db`` to ``folder`` (created if needed) in the compact on-disk form: all its files or,
+    when one cannot be written (a full disk), none."""
+    with atomic_folder(folder) as tmp:
+        _save_database(db, tmp)
+
+
+def _save_database(db: MotionDatabase, folder: Path) -> None:
     index = {"format": FORMAT_VERSION, "source": db.source, "notes": db.notes, "styles": {}}
     for name, st in db.styles.items():
         q = st.local_rot.astype(np.float64)
         q = q * np.where(q[..., 3:4] < 0, -1.0, 1.0)  # one hemisphere, so quantisation is stable
         moving = np.any(np.abs(q - q[:1]) > 1e-5, axis=(0, 2))
         moving[0] = True
-        with atomic_output(folder / f"{name}.npz", "wb") as fh:
+        with open(folder / f"{name}.npz", "wb") as fh:
             np.savez_compressed(
                 fh, rot_q=np.round(q[:, moving] * 32767).astype(np.int16), moving=moving,
                 static_rot=q[0].astype(np.float32), root_pos=st.root_pos, contacts=st.contacts,
@@ -416,7 +420,7 @@ def save_database(db: MotionDatabase, folder: Path) -> None:
         index["styles"][name] = {
             "genre": st.genre, "fps": st.fps, "skeleton": _skeleton_to_json(st.skeleton),
             "clips": list(st.clip_names), "sources": list(st.clip_sources)}
-    with atomic_output(folder / "database.json", "w") as fh:
+    with open(folder / "database.json", "w") as fh:
         json.dump(index, fh, indent=1)
 
 
