@@ -193,7 +193,6 @@ def _limited(request: Request, max_bytes: int) -> Request:
 
 
 MAX_VIEWER_LAG_S = 20.0  # a live viewer further behind the stream than this is let go of
-PING_EVERY_S = 5.0   # WebSocket keepalive (uvicorn's default: 20 s, answered within 20 s)
 SHUTDOWN_S = 5.0     # on Ctrl-C / SIGTERM, wait this long for open connections (uvicorn's default: forever)
 
 
@@ -396,11 +395,11 @@ def _dance_json(song_path: Path, style: str | None, seed: int | None, database) 
 def serve(host: str = "127.0.0.1", port: int = 8000, *, log_level: str = "info", **app_options) -> None:
     """Run the web app with uvicorn until interrupted (Ctrl-C, SIGTERM); 127.0.0.1 (this machine only) by default.
 
-    A live viewer that stops reading is let go of within ``max_viewer_lag_s`` and a few seconds: on a
-    real-time stream the kernel's socket buffers hold minutes of it before a send would block (and
-    the viewer be dropped with a message), so the WebSocket keepalive does it: a ping every
-    ``PING_EVERY_S`` that must be answered within the lag allowed. Shutting down waits for open
-    connections at most ``SHUTDOWN_S``."""
+    A live viewer that stops reading is dropped with a message once a send has been blocked for
+    ``max_viewer_lag_s``; on a real-time stream the kernel's socket buffers hold minutes of it before
+    a send blocks, so uvicorn's WebSocket keepalive (a ping every 20 s, answered within 20 s) lets
+    it go first. (A ping every 5 s dropped every viewer under load in benchmarks/serve_load.py.)
+    Shutting down waits for open connections at most ``SHUTDOWN_S``."""
     import socket
 
     import uvicorn
@@ -411,6 +410,5 @@ def serve(host: str = "127.0.0.1", port: int = 8000, *, log_level: str = "info",
     except OSError as exc:
         raise InputError(f"cannot listen on {host}:{port}: {exc.strerror or exc}; pick another --port "
                          "or --host") from None
-    lag_s = app_options.get("max_viewer_lag_s", MAX_VIEWER_LAG_S)
-    uvicorn.run(create_app(**app_options), host=host, port=port, log_level=log_level, ws_ping_interval=PING_EVERY_S,
-                ws_ping_timeout=lag_s, timeout_graceful_shutdown=SHUTDOWN_S)
+    uvicorn.run(create_app(**app_options), host=host, port=port, log_level=log_level,
+                timeout_graceful_shutdown=SHUTDOWN_S)
