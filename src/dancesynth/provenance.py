@@ -11,11 +11,11 @@ make the same dance again.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .io.files import jsonable
 from .types import MusicFeatures
 
 
@@ -86,7 +86,7 @@ class Provenance:
     def report(self) -> dict:
         """JSON-ready: what ``dance --report`` writes and ``eval --report`` reads."""
         run = self.run
-        return _plain({
+        return jsonable({
             "version": self.version, "engine": self.engine, "song": self.song, "style": run.style,
             "style_fingerprint": run.style_fingerprint, "config": self.config, "summary": self.summary,
             "music_beat_times_s": self.music_beat_times_s, "grid_times_s": run.grid_times_s,
@@ -121,24 +121,6 @@ def make_provenance(engine: str, song: str, config, run: EngineRun, *, fps: floa
         summary.update(step_s_median=float(np.median(step_s)), step_s_max=float(np.max(step_s)))
     summary.update(run.extra)
     summary.update(run.fit)
-    plain_config = dataclasses.asdict(config) if dataclasses.is_dataclass(config) else dict(config or {})
-    return Provenance(engine=engine, song=song, config=_plain(plain_config), summary=summary, run=run,
+    return Provenance(engine=engine, song=song, config=jsonable(config or {}), summary=summary, run=run,
                       music_beat_times_s=np.zeros(0) if music is None else np.asarray(music.beat_times_s),
                       version=__version__)
-
-
-def _plain(value):
-    """JSON-ready copy: arrays to lists, numpy scalars to Python, paths to strings, tuples to lists."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, float) and not np.isfinite(value):
-        return None if np.isnan(value) else ("inf" if value > 0 else "-inf")
-    if value is None or isinstance(value, (bool, int, float, str)):
-        return value
-    return str(value)

@@ -42,6 +42,7 @@ import numpy as np
 
 from .common import SECTIONS, BenchConfig, Progress, skipped
 from ..errors import InputError
+from ..io.files import jsonable
 
 __all__ = ["BenchConfig", "SECTIONS", "run_bench", "format_bench"]
 
@@ -86,7 +87,7 @@ def run_bench(*, quick: bool, out_dir: Path, progress: Progress | None = None,
     out_dir.mkdir(parents=True, exist_ok=True)
     result = {"format": BENCH_FORMAT, "mode": "quick" if quick else "full", "dancesynth": __version__,
               "started": datetime.now(timezone.utc).isoformat(timespec="seconds"), "machine": machine_info(),
-              "config": _jsonable(asdict(cfg)), "timings_s": {}}
+              "config": jsonable(asdict(cfg)), "timings_s": {}}
     t_all = time.perf_counter()
     shared: dict = {}
     for name in SECTIONS:
@@ -106,7 +107,7 @@ def run_bench(*, quick: bool, out_dir: Path, progress: Progress | None = None,
         result["timings_s"][name] = time.perf_counter() - t
     result["timings_s"]["total"] = time.perf_counter() - t_all
     result["targets"] = targets(result)
-    result = _jsonable(result)
+    result = jsonable(result)
     tmp = out_dir / ".bench.json.part"
     tmp.write_text(json.dumps(result, indent=1))
     os.replace(tmp, out_dir / "bench.json")
@@ -260,27 +261,6 @@ def targets(result: dict) -> dict:
         met = None if value is None else bool(value >= limit if at_least else value <= limit)
         out[name] = {"value": value, "limit": limit, "at_least": at_least, "met": met}
     return out
-
-
-def _jsonable(x):
-    """Plain JSON types: numpy scalars and arrays, paths, tuples, non-finite floats (as null)."""
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (bool, np.bool_)):
-        return bool(x)
-    if isinstance(x, (int, np.integer)):
-        return int(x)
-    if isinstance(x, (float, np.floating)):
-        return float(x) if np.isfinite(x) else None
-    if x is None or isinstance(x, str):
-        return x
-    if hasattr(x, "__dataclass_fields__"):
-        return _jsonable(asdict(x))
-    return str(x)
 
 
 def format_bench(result: dict) -> str:

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import shutil
 import tempfile
 from pathlib import Path
+
+import numpy as np
 
 from ..errors import InputError
 
@@ -72,3 +75,24 @@ def atomic_folder(path):
         if isinstance(exc, OSError) and exc.strerror:  # a full disk, a quota, a folder gone read-only
             raise InputError(f"cannot write {path}: {exc.strerror}; nothing was written") from None
         raise
+
+
+def jsonable(x):
+    """Plain JSON types: numpy scalars and arrays, paths, tuples, non-finite floats (as null)."""
+    if isinstance(x, dict):
+        return {str(k): jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return jsonable(x.tolist())
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return float(x) if np.isfinite(x) else None
+    if x is None or isinstance(x, str):
+        return x
+    if hasattr(x, "__dataclass_fields__"):
+        return jsonable(dataclasses.asdict(x))
+    return str(x)
