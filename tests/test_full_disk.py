@@ -25,9 +25,11 @@ def dance_bvh(tmp_path_factory):
     return out
 
 
-def run_on_a_full_disk(*args):
+def run_on_a_full_disk(*args, numba_cache=None):
     env = dict(os.environ)
     env.setdefault("NUMBA_CACHE_DIR", str(REPO / ".cache" / "numba"))  # caches are read, not written, here
+    if numba_cache is not None:
+        env["NUMBA_CACHE_DIR"] = str(numba_cache)
 
     def small_files():
         resource.setrlimit(resource.RLIMIT_FSIZE, (LIMIT_BYTES, LIMIT_BYTES))
@@ -54,3 +56,11 @@ def test_a_full_disk_is_a_one_line_error_naming_the_file(tmp_path, dance_bvh, co
     assert proc.returncode == 2, proc.stderr
     assert_clean_failure(proc, out, "cannot write", "File too large")
     assert sorted(p.name for p in tmp_path.iterdir()) == [], "a partial output was left behind"
+
+
+def test_a_full_disk_under_a_librarys_cache_is_the_same_one_line_error(tmp_path, tmp_path_factory):
+    """librosa's JIT cache (numba) written on a full disk was an internal error, exit 70."""
+    out = tmp_path / "out.bvh"
+    proc = run_on_a_full_disk("conduct", TRUMPET, "-o", out, numba_cache=tmp_path_factory.mktemp("cold-cache"))
+    assert proc.returncode == 2, proc.stderr
+    assert_clean_failure(proc, out, "cannot write", "File too large", "disk space")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import sys
 import time
@@ -446,13 +447,28 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         click.echo("interrupted", err=True)
         return 130
-    except Exception as exc:  # never a traceback for users; keep it one line and say how to get more
-        if os.environ.get("DANCESYNTH_DEBUG"):
-            raise
-        click.echo(f"internal error: {type(exc).__name__}: {exc} (please report it; set DANCESYNTH_DEBUG=1 "
-                   "for the traceback)", err=True)
-        return 70
+    except OSError as exc:
+        if exc.errno not in _FULL_DISK:
+            return _internal_error(exc)
+        # A full disk met outside our own outputs (a library's cache, a temporary file): the same to a user.
+        what = exc.filename or "a cache or temporary file (DANCESYNTH_DEBUG=1 shows which)"
+        click.echo(f"error: cannot write {what}: {exc.strerror}; free some disk space", err=True)
+        return 2
+    except Exception as exc:
+        return _internal_error(exc)
     return 0
+
+
+_FULL_DISK = {errno.ENOSPC, errno.EFBIG, errno.EDQUOT}
+
+
+def _internal_error(exc: Exception) -> int:
+    """Never a traceback for users; one line, and how to get more."""
+    if os.environ.get("DANCESYNTH_DEBUG"):
+        raise exc
+    click.echo(f"internal error: {type(exc).__name__}: {exc} (please report it; set DANCESYNTH_DEBUG=1 "
+               "for the traceback)", err=True)
+    return 70
 
 
 if __name__ == "__main__":
