@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import resource
+import shutil
 import subprocess
 import sys
 
@@ -23,6 +24,15 @@ def dance_bvh(tmp_path_factory):
     out = tmp_path_factory.mktemp("dance") / "trumpet.bvh"
     subprocess.run([sys.executable, "-m", "dancesynth.cli", "dance", str(TRUMPET), "-o", str(out), "-q"], check=True)
     return out
+
+
+@pytest.fixture(scope="module")
+def two_captures(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("mocap") / "salsa"
+    folder.mkdir()
+    for bvh in sorted((SHARED_MOCAP / "cmu_daz_salsa").glob("*.bvh"))[:2]:
+        shutil.copy(bvh, folder / bvh.name)
+    return folder.parent
 
 
 def run_on_a_full_disk(*args, numba_cache=None):
@@ -47,11 +57,11 @@ def run_on_a_full_disk(*args, numba_cache=None):
     (("motifs", "{dance}", "--json", "{out}"), "motifs.json"),
     (("beats", TRUMPET, "--json", "{out}"), "beats.json"),
     (("render", "{dance}", TRUMPET, "-o", "{out}", "--width", "320", "--height", "240"), "video.mp4"),
-    (("build-db", SHARED_MOCAP / "cmu_daz_salsa", "-o", "{out}"), "database"),
+    (("build-db", "{mocap}", "-o", "{out}"), "database"),
 ])
-def test_a_full_disk_is_a_one_line_error_naming_the_file(tmp_path, dance_bvh, command, output):
+def test_a_full_disk_is_a_one_line_error_naming_the_file(tmp_path, dance_bvh, two_captures, command, output):
     out = tmp_path / output
-    args = [str(a).format(out=out, tmp=tmp_path, dance=dance_bvh) for a in command]
+    args = [str(a).format(out=out, tmp=tmp_path, dance=dance_bvh, mocap=two_captures) for a in command]
     proc = run_on_a_full_disk(*args)
     assert proc.returncode == 2, proc.stderr
     assert_clean_failure(proc, out, "cannot write", "File too large")
