@@ -12,7 +12,7 @@ from pathlib import Path
 import click
 
 from .cli_live import render, serve, stream
-from .cli_support import Progress, bvh_output, writable, write_json
+from .cli_support import Progress, bvh_output, dance_bytes, dance_output, writable, write_json
 from .errors import DanceSynthError, InputError
 from .types import DEFAULT_FPS, MAX_SONG_S, SEGMENT_S
 
@@ -46,7 +46,8 @@ def cli():
 @cli.command()
 @click.argument("song", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
-              help="BVH file to write (default: the song's name with .bvh, here).")
+              help="File to write: .bvh, or .glb for glTF (the skeleton animated; default: the song's name "
+                   "with .bvh, here).")
 @click.option("--style", help="Style or genre to dance (see 'dancesynth styles'); default: best tempo match.")
 @click.option("--engine", type=click.Choice(["streaming", "global", "neural", "choreography"]), default=None,
               help="streaming (default): segment by segment as music arrives (Xu et al.); global: whole-song DP "
@@ -78,13 +79,12 @@ def cli():
 @click.option("-q", "--quiet", is_flag=True, help="No summary and no progress bar.")
 def dance(song, output, style, engine, recreate, motif_at, follow_signature, segment_seconds, lookahead, fps, seed,
           database, max_minutes, ths, thr, paper, report_path, quiet):
-    """Make a beat-synchronised dance for SONG (wav, ogg, flac, mp3, ...) and write it as BVH."""
+    """Make a beat-synchronised dance for SONG (wav, ogg, flac, mp3, ...) and write it as BVH or glTF."""
     from .api import DanceConfig, dance as make_dance
-    from .io.bvh import format_bvh
     from .io.files import atomic_output
 
     output = output or Path(song.stem + ".bvh")
-    bvh_output(output)
+    dance_output(output)
     writable(output, report_path)
     config = DanceConfig(style=style, engine=engine, segment_s=segment_seconds, lookahead_s=lookahead, fps=fps,
                          seed=seed, max_duration_s=max_minutes * 60.0, motif_at=motif_at, recreate=recreate,
@@ -108,9 +108,9 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
         progress.close()
     t = time.perf_counter()
     report = clip.provenance.report() if report_path is not None else None
-    # The BVH and the report both or neither: a report that cannot be written leaves no dance behind.
-    with atomic_output(output, "w", encoding="utf-8", newline="\n") as fh:
-        fh.write(format_bvh(clip))
+    # The dance and the report both or neither: a report that cannot be written leaves no dance behind.
+    with atomic_output(output, "wb") as fh:
+        fh.write(dance_bytes(output, clip))
         if report is not None:
             write_json(report_path, report)
     s = clip.provenance.summary
