@@ -19,6 +19,10 @@ done
 soundfont=0  # any General MIDI soundfont will do
 for sf in TimGM6mb.sf2 default-GM.sf2 FluidR3_GM.sf2; do [ -f "/usr/share/sounds/sf2/$sf" ] && soundfont=1; done
 [ $soundfont = 1 ] || missing="$missing timgm6mb-soundfont"
+# Blender's glTF importer runs on the system Python and needs its numpy (Debian's python3-numpy).
+if [ $want_tests = 1 ] && command -v dpkg >/dev/null && ! dpkg -s python3-numpy >/dev/null 2>&1; then
+  missing="$missing python3-numpy"
+fi
 missing=$(echo $missing | tr ' ' '\n' | sort -u | tr '\n' ' ')
 if [ -n "${missing// /}" ]; then
   if [ "$(id -u)" = 0 ]; then SUDO=""; elif command -v sudo >/dev/null; then SUDO="sudo"; else

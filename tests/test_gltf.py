@@ -92,3 +92,33 @@ def test_dance_writes_glb_when_asked_and_refuses_formats_it_does_not_write(tmp_p
     assert len(names) > 10 and np.all(np.isfinite(pos))
     bad = tmp_path / "dance.fbx"
     assert_clean_failure(cli("dance", TRUMPET, "-o", bad), bad, ".bvh", ".glb")
+
+
+def _blender_has_numpy() -> bool:
+    """Debian's Blender runs on the system Python, whose glTF importer needs python3-numpy."""
+    if shutil.which("blender") is None:
+        return False
+    probe = subprocess.run(["blender", "-b", "--factory-startup", "--python-expr", "import numpy"],
+                           capture_output=True, text=True, timeout=120)
+    return "ModuleNotFoundError" not in probe.stdout + probe.stderr
+
+
+@pytest.mark.blender
+def test_blender_imports_the_glb_and_poses_every_joint_as_we_do(salsa, tmp_path):
+    if not _blender_has_numpy():
+        pytest.skip("needs blender with numpy for its glTF importer (bash scripts/setup.sh --test installs "
+                    "python3-numpy)")
+    path = write_glb(tmp_path / "dance.glb", salsa)
+    frames = (0, salsa.n_frames // 2, salsa.n_frames - 1)
+    report_file = tmp_path / "blender.json"
+    subprocess.run(["blender", "-b", "--factory-startup", "--python", str(CLIENTS / "blender_gltf_import.py"), "--",
+                    str(path), str(salsa.fps), str(report_file), ",".join(map(str, frames))],
+                   capture_output=True, text=True, timeout=300)
+    report = json.loads(report_file.read_text())
+    assert report["errors"] == []
+    assert report["actions"] > 0 and set(salsa.skeleton.names) <= set(report["objects"])
+    _, ours = clip_fk(salsa)
+    for f in frames:
+        got = np.array([report["positions"][str(f)][n] for n in salsa.skeleton.names])
+        expected = np.stack([ours[f, :, 0], -ours[f, :, 2], ours[f, :, 1]], axis=1)  # Y-up to Blender's Z-up
+        assert np.abs(got - expected).max() < 1e-4, f
