@@ -122,3 +122,20 @@ def test_blender_imports_the_glb_and_poses_every_joint_as_we_do(salsa, tmp_path)
         got = np.array([report["positions"][str(f)][n] for n in salsa.skeleton.names])
         expected = np.stack([ours[f, :, 0], -ours[f, :, 2], ours[f, :, 1]], axis=1)  # Y-up to Blender's Z-up
         assert np.abs(got - expected).max() < 1e-4, f
+
+
+@pytest.mark.skipif(shutil.which("node") is None or not (CLIENTS / "node_modules" / "three").is_dir(),
+                    reason="needs node and three.js (bash scripts/setup.sh --test installs them)")
+def test_three_js_plays_the_glb_with_every_joint_where_we_have_it(salsa, tmp_path):
+    path = write_glb(tmp_path / "dance.glb", salsa)
+    frames = (0, salsa.n_frames // 2, salsa.n_frames - 1)
+    out = subprocess.run(["node", str(CLIENTS / "three_gltf_import.mjs"), str(path), str(salsa.fps),
+                          ",".join(map(str, frames))], capture_output=True, text=True, cwd=CLIENTS, timeout=120,
+                         check=True)
+    report = json.loads(out.stdout)
+    assert report["errors"] == [] and report["animations"] == 1
+    assert report["duration"] == pytest.approx(salsa.duration_s, abs=1e-4)
+    _, ours = clip_fk(salsa)
+    for f in frames:
+        got = np.array([report["positions"][str(f)][n] for n in salsa.skeleton.names])
+        assert np.abs(got - ours[f]).max() < 1e-4, f
