@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .harness import Case, Insane, Target, mutate_bytes, rng_for
+from .harness import Case, Insane, Target, mutate_bytes, rng_for, write_file
 
 REPO = Path(__file__).resolve().parents[2]
 SONG = REPO / "src" / "dancesynth" / "data" / "music" / "Kevin_MacLeod_-_Vibe_Ace.ogg"
@@ -83,10 +83,7 @@ class AudioTarget(Target):
 
     def save(self, case: Case, folder: Path, stem: str) -> Path:
         suffix, data = case.data
-        folder.mkdir(parents=True, exist_ok=True)
-        path = folder / f"{stem}{suffix}"
-        path.write_bytes(data)
-        return path
+        return write_file(folder, f"{stem}{suffix}", data)
 
 
 def _mutate(rng: random.Random, name: str, data: bytes) -> tuple[bytes, str]:

@@ -67,15 +67,19 @@ class Target:
 
     def save(self, case: Case, folder: Path, stem: str) -> Path:
         """Write ``case`` so that a developer can replay it; returns the file."""
-        folder.mkdir(parents=True, exist_ok=True)
         data = case.data
         if isinstance(data, (bytes, str)):
-            path = folder / f"{stem}{self.suffix}"
-            path.write_bytes(data if isinstance(data, bytes) else data.encode("utf-8", "surrogateescape"))
-        else:
-            path = folder / f"{stem}.txt"
-            path.write_text(repr(data) + "\n")
-        return path
+            return write_file(folder, f"{stem}{self.suffix}",
+                              data if isinstance(data, bytes) else data.encode("utf-8", "surrogateescape"))
+        return write_file(folder, f"{stem}.txt", (repr(data) + "\n").encode("utf-8"))
+
+
+def write_file(folder: Path, name: str, data: bytes) -> Path:
+    """A reproducer's bytes in ``folder`` (made if needed); returns the file."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / name
+    path.write_bytes(data)
+    return path
 
 
 @dataclass

@@ -17,7 +17,7 @@ import json
 import math
 from pathlib import Path
 
-from .harness import Case, Insane, Target, hypothesis_examples, mutate_bytes, rng_for
+from .harness import Case, Insane, Target, hypothesis_examples, mutate_bytes, rng_for, write_file
 
 PARAMETERS = ["w1", "l1", "l2", "bounce", "fps", "max_segment_notes", "speed_limit", "reach", "elbow_min",
               "elbow_max", "nod", "ideal_range", "ideal_duration", "y_scale", "sweep_width"]
@@ -97,10 +97,7 @@ class TomlTarget(Target):
 
     def save(self, case: Case, folder: Path, stem: str) -> Path:
         kind, data = case.data
-        folder.mkdir(parents=True, exist_ok=True)
-        path = folder / f"{stem}-{kind}.toml"
-        path.write_bytes(data)
-        return path
+        return write_file(folder, f"{stem}-{kind}.toml", data)
 
 
 def _documents():
