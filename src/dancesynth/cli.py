@@ -12,7 +12,7 @@ from pathlib import Path
 import click
 
 from .cli_live import render, serve, stream
-from .cli_support import Progress, bvh_output, dance_bytes, dance_output, writable, write_json
+from .cli_support import Progress, bvh_output, writable, write_json
 from .errors import DanceSynthError, InputError
 from .types import DEFAULT_FPS, MAX_SONG_S, SEGMENT_S
 
@@ -46,8 +46,14 @@ def cli():
 @cli.command()
 @click.argument("song", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
-              help="File to write: .bvh, or .glb for glTF (the skeleton animated; default: the song's name "
-                   "with .bvh, here).")
+              help="File to write, by extension: .bvh, .glb (glTF, skinned character), .vrma (VRM Animation), "
+                   ".fbx (needs Blender), .mp4 (video with the song). Default: the song's name with .bvh, here.")
+@click.option("--character", default=None, metavar="NAME|FILE",
+              help="Who dances: a built-in (see 'dancesynth characters'; default mannequin) or your rig/model as "
+                   ".bvh, .glb, .gltf or .vrm; 'source' keeps the skeleton the style was captured on.")
+@click.option("--bone-map", type=click.Path(dir_okay=False, path_type=Path),
+              help="TOML file naming your character's humanoid bones ([bones] hips = \"pelvis\", ...) where "
+                   "the automatic mapping cannot.")
 @click.option("--style", help="Style or genre to dance (see 'dancesynth styles'); default: best tempo match.")
 @click.option("--engine", type=click.Choice(["streaming", "global", "neural", "choreography"]), default=None,
               help="streaming (default): segment by segment as music arrives (Xu et al.); global: whole-song DP "
@@ -77,15 +83,17 @@ def cli():
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Also write a JSON report (beats, transitions, time warps) for 'dancesynth eval --report'.")
 @click.option("-q", "--quiet", is_flag=True, help="No summary and no progress bar.")
-def dance(song, output, style, engine, recreate, motif_at, follow_signature, segment_seconds, lookahead, fps, seed,
-          database, max_minutes, ths, thr, paper, report_path, quiet):
-    """Make a beat-synchronised dance for SONG (wav, ogg, flac, mp3, ...) and write it as BVH or glTF."""
+def dance(song, output, character, bone_map, style, engine, recreate, motif_at, follow_signature, segment_seconds,
+          lookahead, fps, seed, database, max_minutes, ths, thr, paper, report_path, quiet):
+    """Make a beat-synchronised dance for SONG (wav, ogg, flac, mp3, ...) and write it for your character."""
     from .api import DanceConfig, dance as make_dance
+    from .export.formats import check_format
     from .io.files import atomic_output
 
     output = output or Path(song.stem + ".bvh")
-    dance_output(output)
+    suffix = check_format(output)
     writable(output, report_path)
+    target = _character(character, bone_map, suffix)
     config = DanceConfig(style=style, engine=engine, segment_s=segment_seconds, lookahead_s=lookahead, fps=fps,
                          seed=seed, max_duration_s=max_minutes * 60.0, motif_at=motif_at, recreate=recreate,
                          follow_signature=follow_signature)
@@ -108,11 +116,18 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
         progress.close()
     t = time.perf_counter()
     report = clip.provenance.report() if report_path is not None else None
+    moved, target = _retargeted(clip, target)
     # The dance and the report both or neither: a report that cannot be written leaves no dance behind.
-    with atomic_output(output, "wb") as fh:
-        fh.write(dance_bytes(output, clip))
-        if report is not None:
-            write_json(report_path, report)
+    if suffix == ".mp4":
+        _video(moved, target, song, output, report_path, report, quiet)
+    else:
+        from .export.formats import encode_dance
+
+        data = encode_dance(suffix, moved, target)
+        with atomic_output(output, "wb") as fh:
+            fh.write(data)
+            if report is not None:
+                write_json(report_path, report)
     s = clip.provenance.summary
     write_s = time.perf_counter() - t
     for warning in s.get("warnings", ()):  # also with --quiet: the dance is not what the user may expect
@@ -154,7 +169,67 @@ def dance(song, output, style, engine, recreate, motif_at, follow_signature, seg
     click.echo(f"time      music {tm['music_s']:.2f} s, database {tm['database_s']:.2f} s, {stage} "
                f"{tm['graph_s']:.2f} s{cached}, synthesis "
                f"{tm['synthesis_s']:.2f} s, write {tm['write_s']:.2f} s; total {time.perf_counter() - t0:.2f} s")
-    click.echo(f"wrote     {output} ({s['frames']} frames at {s['fps']:g} fps)")
+    click.echo(f"wrote     {output} ({s['frames']} frames at {s['fps']:g} fps, on {target.name}"
+               + (f", {moved.skeleton.n_joints} joints" if suffix != ".mp4" else "") + ")")
+
+
+def _character(spec, bone_map, suffix):
+    """The character to dance, checked before any work (a missing Blender, too)."""
+    from .retarget import SOURCE
+    from .retarget.character import DEFAULT_CHARACTER, load_character
+
+    if suffix == ".fbx":
+        from .export.fbx import find_blender
+
+        find_blender()
+    spec = spec or DEFAULT_CHARACTER
+    if spec == SOURCE:
+        if bone_map is not None:
+            raise InputError("--bone-map names the bones of your own --character; it does not apply to 'source'")
+        if suffix == ".vrma":
+            raise InputError("a .vrma is made on a humanoid rig: leave out --character source")
+        return None
+    return load_character(spec, bone_map=bone_map)
+
+
+def _retargeted(clip, target):
+    from .retarget import SOURCE, on_character
+
+    return on_character(clip, SOURCE if target is None else target)
+
+
+def _video(clip, character, song, output, report_path, report, quiet):
+    """``dance -o dance.mp4``: the dance rendered with the song, in one step."""
+    from .export.video import render_video
+
+    progress = Progress(enabled=not quiet and sys.stderr.isatty())
+    try:
+        render_video(clip, song, output, character=character,
+                     progress=lambda done, total: progress("render", done, total))
+    finally:
+        progress.close()
+    if report is not None:
+        try:   # the video and the report both or neither
+            write_json(report_path, report)
+        except BaseException:
+            output.unlink(missing_ok=True)
+            raise
+
+
+@cli.command()
+def characters():
+    """List the built-in characters and rigs a dance can be put on (dance --character NAME)."""
+    from .retarget.character import DEFAULT_CHARACTER, FILE_KINDS
+    from .retarget.rigs import DESCRIPTIONS, rig_skeleton
+
+    w = max(len(n) for n in DESCRIPTIONS) + 2
+    click.echo(f"{'character':<{w}}{'joints':>7}  description")
+    for name, text in DESCRIPTIONS.items():
+        default = " (default)" if name == DEFAULT_CHARACTER else ""
+        click.echo(f"{name:<{w}}{rig_skeleton(name)[0].n_joints:>7}  {text}{default}")
+    click.echo(f"{'source':<{w}}{'':>7}  the skeleton the chosen style was captured on")
+    click.echo("your own: --character FILE, one of " + ", ".join(f"{s} ({k})" for s, k in FILE_KINDS.items())
+               + "; --bone-map FILE.toml names bones the automatic mapping misses")
 
 
 @cli.command()

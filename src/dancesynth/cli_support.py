@@ -32,27 +32,6 @@ class Progress:
             bar.close()
 
 
-DANCE_FORMATS = (".bvh", ".glb")
-
-
-def dance_output(path: Path) -> Path:
-    """``path``, refused unless it names a format a dance is written in."""
-    if path.suffix.lower() not in DANCE_FORMATS:
-        raise InputError(f"output {path} must end in {' or '.join(DANCE_FORMATS)} (BVH, or glTF binary)")
-    return path
-
-
-def dance_bytes(path: Path, clip) -> bytes:
-    """``clip`` in the format ``path``'s extension names (see ``dance_output``)."""
-    if path.suffix.lower() == ".glb":
-        from .export.gltf import glb_bytes
-
-        return glb_bytes(clip)
-    from .io.bvh import format_bvh
-
-    return format_bvh(clip).encode("utf-8")
-
-
 def bvh_output(path: Path) -> Path:
     """``path``, refused unless it names a .bvh file."""
     if path.suffix.lower() != ".bvh":

@@ -9,11 +9,13 @@ bone table define the target. Bones are found by ``humanoid.find_bones``; a TOML
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
+from ..rotations import IDENTITY
 from ..types import Skeleton
 
 
@@ -58,3 +60,80 @@ class Character:
     nodes: tuple[int, ...] | None = None
     armature: np.ndarray = field(default_factory=lambda: np.eye(4))
     kind: str = "builtin"     # "builtin" | "bvh" | "gltf" | "vrm0" | "vrm1"
+    ankle_ground: float | None = None   # ankles' height when standing on the floor; None: as in the rest pose
+
+
+DEFAULT_CHARACTER = "mannequin"
+FILE_KINDS = {".bvh": "BVH rig", ".glb": "glTF binary model", ".gltf": "glTF model", ".vrm": "VRM avatar (0.x or 1.0)"}
+
+
+def builtin_character(name: str) -> Character:
+    """A built-in character by name (``rigs.LAYOUTS``); only the mannequin has a mesh."""
+    from .rigs import LAYOUTS, rig_skeleton
+
+    if name not in LAYOUTS:
+        raise InputError(f"unknown character {name!r}: use one of {', '.join(LAYOUTS)} or a .bvh/.glb/.gltf/.vrm file")
+    if name == "mannequin":
+        from .mannequin import mannequin_character
+
+        return mannequin_character()
+    skeleton, bones = rig_skeleton(name)
+    return Character(name, skeleton, bones, np.tile(IDENTITY, (skeleton.n_joints, 1)), skeleton.offsets[0].copy())
+
+
+def source_character(skeleton: Skeleton) -> Character:
+    """The skeleton a dance was made on, as a character (its bones found where they can be)."""
+    from .humanoid import find_bones
+
+    try:
+        bones = find_bones(skeleton)
+    except InputError:
+        bones = {}
+    return Character("source", skeleton, bones, np.tile(IDENTITY, (skeleton.n_joints, 1)), skeleton.offsets[0].copy(),
+                     kind="source")
+
+
+def load_character(spec, *, bone_map=None) -> Character:
+    """A character from a built-in name or a file (see the module docstring); ``bone_map``: a TOML path."""
+    from .humanoid import find_bones, read_bone_map
+    from .rigs import LAYOUTS
+
+    overrides = read_bone_map(bone_map) if bone_map is not None else None
+    if str(spec) in LAYOUTS and not Path(str(spec)).suffix:
+        character = builtin_character(str(spec))
+        if overrides:
+            character = replace(character, bones=find_bones(character.skeleton, overrides, what=character.name))
+        return character
+    path = Path(spec)
+    kind = FILE_KINDS.get(path.suffix.lower())
+    if kind is None:
+        if not path.suffix:
+            raise InputError(f"unknown character {str(spec)!r}: use one of {', '.join(LAYOUTS)} "
+                             f"or a file ({', '.join(FILE_KINDS)})")
+        raise InputError(f"character {path}: cannot read {path.suffix} files; use {', '.join(FILE_KINDS)}")
+    if not path.is_file():
+        raise InputError(f"character file {path} does not exist")
+    if path.suffix.lower() == ".bvh":
+        return _bvh_character(path, overrides)
+    from .gltf_character import load_gltf_character
+
+    character = load_gltf_character(path)
+    if overrides or not character.bones:
+        character = replace(character, bones=find_bones(character.skeleton, overrides, what=path.name))
+    return character
+
+
+def _bvh_character(path: Path, overrides) -> Character:
+    """A BVH rig: its offsets and names; its rest pose is the zero rotation. The floor is where its
+    own frames stand (a BVH's rest pose says nothing about where the floor is)."""
+    from ..io.bvh import read_bvh
+    from ..kinematics import clip_fk
+    from .humanoid import find_bones
+
+    clip = read_bvh(path)
+    bones = find_bones(clip.skeleton, overrides, what=path.name)
+    _, pos = clip_fk(clip)
+    ankles = pos[:, [bones["leftFoot"], bones["rightFoot"]], 1].min(axis=1)
+    sk = clip.skeleton
+    return Character(path.stem, sk, bones, np.tile(IDENTITY, (sk.n_joints, 1)), sk.offsets[0].copy(),
+                     source=path, kind="bvh", ankle_ground=float(np.percentile(ankles, 1.0)))

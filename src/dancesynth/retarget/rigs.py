@@ -170,7 +170,7 @@ def _where(spec: str) -> np.ndarray:
 
 def rig_skeleton(name: str) -> tuple[Skeleton, dict[str, int]]:
     """The built-in rig ``name`` as a Skeleton, and its humanoid bone -> joint map."""
-    rows = LAYOUTS[name]
+    rows = LAYOUTS[name] if name == "smpl" else _depth_first(LAYOUTS[name])   # SMPL keeps SMPL's order
     names = [r[0] for r in rows]
     index = {n: i for i, n in enumerate(names)}
     world = np.array([_where(r[2]) for r in rows])
@@ -183,6 +183,20 @@ def rig_skeleton(name: str) -> tuple[Skeleton, dict[str, int]]:
     end_sites = {i: _leaf_tip(spec) for i, (_, _, spec) in enumerate(rows) if not np.any(parents == i)}
     channels = tuple(ROOT_CHANNELS if p < 0 else JOINT_CHANNELS for p in parents)
     return Skeleton(tuple(names), parents, offsets, channels, end_sites), bones
+
+
+def _depth_first(rows):
+    """Rows in the order a BVH file lists its joints, so a rig read back from BVH keeps its order."""
+    out = []
+
+    def visit(row):
+        out.append(row)
+        for child in rows:
+            if child[1] == row[0]:
+                visit(child)
+
+    visit(rows[0])
+    return out
 
 
 def _leaf_tip(spec: str) -> np.ndarray:

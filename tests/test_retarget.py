@@ -1,0 +1,172 @@
+"""Retargeting (issue 14): any bundled style danced by any character, bones pointing where the source's
+point, feet planted, root height in proportion; rigs a user brings mapped automatically or by a TOML."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import SHARED_MOCAP
+from user_rigs import apose_mixamo_bvh
+from test_cli import TRUMPET, assert_clean_failure, cli
+from dancesynth import rotations as rot
+from dancesynth.errors import InputError
+from dancesynth.eval.retarget import retarget_quality
+from dancesynth.io.bvh import format_bvh, read_bvh
+from dancesynth.kinematics import clip_fk
+from dancesynth.retarget.character import builtin_character, load_character
+from dancesynth.retarget.humanoid import find_bones
+from dancesynth.retarget.rigs import LAYOUTS, rig_skeleton
+from dancesynth.retarget.solve import retarget
+from dancesynth.types import MotionClip, Skeleton
+
+CC_RIG = SHARED_MOCAP / "cmu_iclone_cc" / "002_01.bvh"
+
+
+@pytest.fixture(scope="module")
+def dances(bundled_db, bundled_song):
+    """A dance of each distinct bundled skeleton layout: Daz (salsa), CMU (mj, whirl), Perfume (jpop)."""
+    from dancesynth.api import dance
+
+    return {s: dance(bundled_song, database=bundled_db, style=s, seed=3)
+            for s in ("salsa-120-150bpm", "mj", "whirl", "jpop")}
+
+
+def assert_faithful(source, target, bones):
+    q = retarget_quality(source, target, find_bones(source.skeleton), bones)
+    assert q["bone_direction_median_deg"] < 5.0, q
+    assert q["skate_target"] <= q["skate_source"] * 1.1 + 1e-9, q
+    assert q["penetration_target_m"] <= 0.02, q
+    assert abs(q["root_height_target"] / q["root_height_source"] - 1) < 0.05, q
+    return q
+
+
+def test_every_bundled_skeleton_maps_its_humanoid_bones_by_name_and_hierarchy(bundled_db):
+    expected = {"salsa-120-150bpm": {"leftUpperArm": "lShldr", "leftShoulder": "lCollar", "spine": "abdomen"},
+                "mj": {"leftUpperArm": "LeftShoulder", "leftShoulder": "LeftCollar", "leftHand": "LeftWrist"},
+                "whirl": {"leftUpperArm": "LeftArm", "leftShoulder": "LeftShoulder", "upperChest": "Spine1"},
+                "jpop": {"leftUpperArm": "LeftShoulder", "leftFoot": "LeftAnkle", "leftToes": "LeftToe"}}
+    for style, want in expected.items():
+        sk = bundled_db.styles[style].skeleton
+        bones = find_bones(sk)
+        assert {b: sk.names[bones[b]] for b in want} == want
+
+
+@pytest.mark.parametrize("name", list(LAYOUTS))
+def test_each_builtin_rig_maps_to_the_bones_it_was_built_with(name):
+    sk, bones = rig_skeleton(name)
+    assert find_bones(sk) == bones
+
+
+def test_a_character_creator_rig_with_twist_helpers_maps_to_its_main_bones():
+    if not CC_RIG.is_file():
+        pytest.skip(f"{CC_RIG} (shared mocap data) is not on this machine")
+    ch = load_character(CC_RIG)
+    names = {b: ch.skeleton.names[j] for b, j in ch.bones.items()}
+    assert names["hips"] == "CC_Base_Hip" and names["leftLowerArm"] == "CC_Base_L_Forearm"
+    assert names["leftToes"] == "CC_Base_L_ToeBase" and names["spine"] == "CC_Base_Waist"
+
+
+@pytest.mark.parametrize("style", ["salsa-120-150bpm", "mj", "whirl", "jpop"])
+@pytest.mark.parametrize("name", ["mixamo", "smpl", "cmu"])
+def test_every_style_dances_faithfully_on_every_builtin_rig(dances, style, name):
+    ch = builtin_character(name)
+    out = retarget(dances[style], ch)
+    assert out.skeleton is ch.skeleton and out.n_frames == dances[style].n_frames
+    assert_faithful(dances[style], out, ch.bones)
+
+
+def test_a_mixamo_named_apose_rig_in_centimetres_dances_with_its_own_names_and_proportions(dances, tmp_path):
+    path = apose_mixamo_bvh(tmp_path)
+    ch = load_character(path)
+    src = dances["salsa-120-150bpm"]
+    out = retarget(src, ch)
+    assert_faithful(src, out, ch.bones)
+    # In the A-pose rest the forearm hangs 40 degrees down; dancing, it points where the source's does.
+    rest_arm = ch.skeleton.offsets[ch.bones["leftHand"]]
+    assert rest_arm[1] < -0.1 * np.linalg.norm(rest_arm)
+
+
+def test_dance_cli_writes_the_users_rig_with_its_joint_names_and_offsets(tmp_path, bundled_song):
+    rig = apose_mixamo_bvh(tmp_path)
+    out = tmp_path / "mine.bvh"
+    r = cli(*["dance", TRUMPET, "--character", str(rig), "-o", str(out), "-q"])
+    assert r.returncode == 0, (r.stdout + r.stderr)
+    got, want = read_bvh(out), read_bvh(rig)
+    assert got.skeleton.names == want.skeleton.names
+    assert np.allclose(got.skeleton.offsets[1:], want.skeleton.offsets[1:], atol=1e-5)
+    _, pos = clip_fk(got)
+    _, rig_pos = clip_fk(want)
+    assert pos[:, :, 1].min() > rig_pos[:, :, 1].min() - 0.02   # feet stay above its floor
+
+
+def test_default_rig_is_the_same_whatever_the_style(tmp_path, bundled_song):
+    rigs = set()
+    for style in ("salsa-120-150bpm", "jpop"):
+        out = tmp_path / f"{style}.bvh"
+        assert cli(*["dance", TRUMPET, "--style", style, "-o", str(out), "-q"]).returncode == 0
+        rigs.add(read_bvh(out).skeleton.names)
+    assert rigs == {rig_skeleton("mannequin")[0].names}
+    out = tmp_path / "source.bvh"
+    assert cli(*["dance", TRUMPET, "--style", "jpop", "--character", "source", "-o", str(out),
+                "-q"]).returncode == 0
+    assert read_bvh(out).skeleton.n_joints == 23    # Perfume's own skeleton, kept on request
+
+
+def test_a_rig_without_the_required_bones_is_refused_with_the_toml_that_fixes_it(tmp_path, bundled_song):
+    sk, _ = rig_skeleton("mannequin")
+    names = tuple(f"bone_{i:02d}" for i in range(sk.n_joints))
+    odd = Skeleton(names, sk.parents, sk.offsets, sk.channels, sk.end_sites)
+    rig = tmp_path / "odd.bvh"
+    rig.write_text(format_bvh(MotionClip(odd, 30.0, sk.offsets[:1], np.tile(rot.IDENTITY, (1, sk.n_joints, 1)))))
+    out = tmp_path / "out.glb"
+    r = cli("dance", TRUMPET, "--character", rig, "-o", out)
+    assert_clean_failure(r, out)
+    assert "hips" in (r.stdout + r.stderr) and "leftHand" in (r.stdout + r.stderr) and "[bones]" in (r.stdout + r.stderr) and "--bone-map" in (r.stdout + r.stderr)
+
+    # The TOML the message shows makes the same rig dance.
+    canonical = rig_skeleton("mannequin")[0].names
+    toml = tmp_path / "bones.toml"
+    toml.write_text("[bones]\n" + "".join(f'{canonical[i]} = "{n}"\n' for i, n in enumerate(names)))
+    r = cli(*["dance", TRUMPET, "--character", str(rig), "--bone-map", str(toml), "-o",
+             str(tmp_path / "odd_dance.bvh"), "-q"])
+    assert r.returncode == 0, (r.stdout + r.stderr)
+    assert set(read_bvh(tmp_path / "odd_dance.bvh").skeleton.names) == set(names)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--character", "robot"], "unknown character 'robot'"),
+    (["--character", "missing.glb"], "does not exist"),
+    (["--character", "rig.obj"], "cannot read .obj"),
+])
+def test_bad_characters_get_one_line_errors_and_no_file(tmp_path, bundled_song, args, message):
+    out = tmp_path / "out.bvh"
+    (tmp_path / "rig.obj").write_text("o cube\n")
+    r = cli("dance", TRUMPET, "-o", out, *[a if a != "rig.obj" else tmp_path / a for a in args])
+    assert_clean_failure(r, out, message)
+
+
+def test_an_output_extension_we_do_not_write_is_refused_before_dancing(tmp_path, bundled_song):
+    out = tmp_path / "dance.obj"
+    assert_clean_failure(cli("dance", TRUMPET, "-o", out), out, ".glb", ".vrma")
+
+
+def test_bone_map_errors_name_the_bad_entry(tmp_path):
+    toml = tmp_path / "bones.toml"
+    toml.write_text('[bones]\nelbow = "x"\n')
+    with pytest.raises(InputError, match="unknown humanoid bone 'elbow'"):
+        load_character("mixamo", bone_map=toml)
+    toml.write_text('[bones]\nhips = "nope"\n')
+    with pytest.raises(InputError, match="is not a joint of mixamo"):
+        load_character("mixamo", bone_map=toml)
+    toml.write_text('[bones\n')
+    with pytest.raises(InputError, match="not valid TOML"):
+        load_character("mixamo", bone_map=toml)
+
+
+def test_characters_lists_the_builtins():
+    r = cli(*["characters"])
+    assert r.returncode == 0
+    for name in LAYOUTS:
+        assert name in (r.stdout + r.stderr)
+    assert "(default)" in (r.stdout + r.stderr) and ".vrm" in (r.stdout + r.stderr)
