@@ -41,7 +41,7 @@ def encode_dance(suffix: str, clip, character) -> bytes:
             return glb
         from .fbx import fbx_bytes
 
-        return fbx_bytes(glb, fps=clip.fps, name=character.name)
+        return fbx_bytes(glb, fps=clip.fps, name="dance")
     if suffix == ".vrma":
         from .vrm import vrma_bytes
 
