@@ -2,16 +2,22 @@
 // about 0.5 s apart, once the character dances.
 //
 // Run by tests/test_serve.py as
-//     node tests/clients/viewer_check.mjs URL OUT_DIR song SONG_SUBSTRING [CHROMIUM]
+//     node tests/clients/viewer_check.mjs URL OUT_DIR song SONG_SUBSTRING [CHROMIUM] [OPTIONS]
 //         pick a bundled song, press Dance, play it;
 //     node tests/clients/viewer_check.mjs URL OUT_DIR live STREAM_URL [CHROMIUM]
 //         dance live to an http stream (2 s segments), played with the delay the server asks for.
-// Writes OUT_DIR/a.png and OUT_DIR/b.png and prints one JSON object on stdout (timings,
-// the music clock at each shot, page errors); every wait is bounded.
+// OPTIONS (song mode), JSON: {"engine": .., "character": ..} choose them before Dance;
+// "stick": true also switches to the stick figure and takes c.png and d.png;
+// "playback": true pauses, seeks and plays to the end, noting the status line each time;
+// "video": true presses the MP4 button and saves the download as OUT_DIR/dance.mp4.
+// Writes OUT_DIR/a.png, OUT_DIR/b.png and OUT_DIR/page.png (the whole page) and prints one JSON
+// object on stdout (timings, the music clock and status line at each shot, page errors); every
+// wait is bounded.
 import { chromium } from 'playwright-core';
 
-const [url, outDir, mode, value, executablePath = '/usr/bin/chromium'] = process.argv.slice(2);
-const report = { ok: false, errors: [], console: [], timings: {}, times: [] };
+const [url, outDir, mode, value, executablePath = '/usr/bin/chromium', optionsJSON = '{}'] = process.argv.slice(2);
+const options = JSON.parse(optionsJSON);
+const report = { ok: false, errors: [], console: [], timings: {}, times: [], statuses: {}, video: {} };
 const t0 = Date.now();
 const since = () => Date.now() - t0;
 
@@ -26,10 +32,13 @@ try {
 			'--mute-audio'],
 	});
 	report.timings.browser_ms = since();
-	const page = await browser.newPage({ viewport: { width: 800, height: 600 } });
+	const page = await browser.newPage({ viewport: { width: 1000, height: 700 }, acceptDownloads: true });
 	page.setDefaultTimeout(20000);
 	page.on('pageerror', (e) => report.errors.push(`pageerror: ${e.message}`));
 	page.on('console', (m) => { if (m.type() === 'error') report.console.push(m.text()); });
+	const pageState = () => page.evaluate(() => ({ ...window.dancesynth, status: document.getElementById('status').textContent }));
+	const statusText = () => page.evaluate(() => document.getElementById('status').textContent);
+	const view = page.locator('#view');
 
 	await page.goto(url, { waitUntil: 'load', timeout: 20000 });
 	await page.waitForFunction(() => window.dancesynth && window.dancesynth.state !== 'loading', null,
@@ -46,7 +55,7 @@ try {
 		await page.waitForFunction(() => ['error', 'closed'].includes(window.dancesynth.live.state) ||
 			(window.dancesynth.live.time > 1.0 && window.dancesynth.live.frames > 45), null, { timeout: 40000 });
 		report.timings.live_dancing_ms = since();
-		report.page = await page.evaluate(() => ({ ...window.dancesynth, status: document.getElementById('status').textContent }));
+		report.page = await pageState();
 		if (report.page.live.error || report.page.live.state === 'closed') throw new Error(`live failed: ${report.page.live.error}`);
 		clock = () => window.dancesynth.live.time;
 	} else {
@@ -56,25 +65,41 @@ try {
 		}, value);
 		if (!option) throw new Error(`no song matching ${value}`);
 		await page.selectOption('#song', option);
+		for (const field of ['engine', 'character']) {
+			if (options[field]) await page.selectOption(`#${field}`, options[field]);
+		}
 		const tDance = Date.now();
 		await page.click('#dance');
 		await page.waitForFunction(() => ['ready', 'error'].includes(window.dancesynth.state), null, { timeout: 90000 });
 		report.timings.dance_ms = Date.now() - tDance;
-		const st = await page.evaluate(() => ({ ...window.dancesynth, status: document.getElementById('status').textContent }));
+		const st = await pageState();
 		report.page = st;
 		if (st.state !== 'ready') throw new Error(`dance failed: ${st.error}`);
 
 		// Play from the start (autoplay is allowed by the flag above) and wait for the clock to run.
-		await page.evaluate(() => { const a = document.getElementById('audio'); a.currentTime = 0; return a.play(); });
-		await page.waitForFunction(() => document.getElementById('audio').currentTime > 1.0, null, { timeout: 15000 });
+		await playFrom(page, 0, 1.0);
 		clock = () => document.getElementById('audio').currentTime;
 	}
-	const view = page.locator('#view');
-	for (const name of ['a', 'b']) {
-		report.times.push(await page.evaluate(clock));
-		await view.screenshot({ path: `${outDir}/${name}.png`, timeout: 10000 });
-		if (name === 'a') await page.waitForTimeout(500);
+	// Two shots 0.5 s apart, with the music clock and the status line at each.
+	const shots = async (names) => {
+		for (const name of names) {
+			report.times.push(await page.evaluate(clock));
+			report.statuses[name] = await statusText();
+			await view.screenshot({ path: `${outDir}/${name}.png`, timeout: 10000 });
+			if (name !== names[names.length - 1]) await page.waitForTimeout(500);
+		}
+	};
+	await shots(['a', 'b']);
+	await page.screenshot({ path: `${outDir}/page.png`, timeout: 10000 });
+	if (options.stick) {
+		await page.selectOption('#figure', 'stick');
+		report.view_after_toggle = await page.evaluate(() => window.dancesynth.view);
+		await playFrom(page, 0.5, 1.0); // the song may have ended meanwhile
+		await shots(['c', 'd']);
 	}
+	if (options.playback) await checkPlayback(page, statusText);
+	if (options.video) await checkVideo(page);
+	report.page = await pageState();
 	report.ok = true;
 } catch (e) {
 	report.errors.push(`exception: ${e && e.stack ? e.stack : e}`);
@@ -83,3 +108,52 @@ try {
 	if (browser) await browser.close().catch(() => {});
 }
 process.stdout.write(JSON.stringify(report));
+
+// Play the song from `from` s and wait until its clock passes `past` s.
+async function playFrom(page, from, past) {
+	await page.evaluate((t) => { const a = document.getElementById('audio'); a.currentTime = t; return a.play(); }, from);
+	await page.waitForFunction((t) => document.getElementById('audio').currentTime > t, past, { timeout: 15000 });
+}
+
+// Pause, seek while paused, then play to the end: the status line should say so each time.
+async function checkPlayback(page, statusText) {
+	const audio = (fn, arg) => page.evaluate(fn, arg);
+	await playFrom(page, 0.5, 1.0);
+	await audio(() => document.getElementById('audio').pause());
+	await page.waitForFunction(() => window.dancesynth.playback.state === 'paused', null, { timeout: 5000 });
+	report.statuses.paused = await statusText();
+	await page.waitForTimeout(400);
+	report.statuses.paused_later = await statusText(); // the same: the clock stopped
+	await audio(() => { document.getElementById('audio').currentTime = 2.0; });
+	await page.waitForFunction(() => Math.abs(window.dancesynth.playback.time - 2.0) < 0.05, null, { timeout: 5000 });
+	report.statuses.seeked = await statusText();
+	await audio(() => {
+		const a = document.getElementById('audio');
+		a.currentTime = Math.max(a.duration - 0.6, 0);
+		return a.play();
+	});
+	await page.waitForFunction(() => window.dancesynth.playback.state === 'finished', null, { timeout: 10000 });
+	report.statuses.finished = await statusText();
+	report.playback_end = await page.evaluate(() => window.dancesynth.playback);
+}
+
+// Press MP4 and wait for the download, noting the button's states on the way (it renders on the server).
+async function checkVideo(page) {
+	const seen = new Set();
+	const t = Date.now();
+	const download = page.waitForEvent('download', { timeout: 120000 });
+	await page.click('#dl-mp4');
+	const poll = setInterval(() => {
+		page.evaluate(() => document.getElementById('dl-mp4').textContent).then((s) => seen.add(s)).catch(() => {});
+	}, 100);
+	try {
+		const file = await download;
+		await file.saveAs(`${outDir}/dance.mp4`);
+		report.video.file_name = file.suggestedFilename();
+	} finally {
+		clearInterval(poll);
+	}
+	report.video.ms = Date.now() - t;
+	report.video.labels = [...seen];
+	report.video.state = await page.evaluate(() => window.dancesynth.video);
+}

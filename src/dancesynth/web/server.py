@@ -2,8 +2,12 @@
 
 ``create_app`` builds a Starlette app: the page and its static files (three.js is
 vendored, so it works offline), the bundled songs, and ``POST /api/dance``, which
-runs ``dancesynth.dance`` in a worker thread and answers the BVH text, the music's
-beats and a URL the page plays the song from. ``/ws/live?url=`` dances to a stream,
+runs ``dancesynth.dance`` with the chosen engine in a worker thread, moves the dance onto
+the chosen character (``retarget``) and answers the BVH text (the stick figure on the
+character's rig), the music's beats and sections, a URL the page plays the song from and
+the dance's own URLs (``/api/dances/{id}/...``: GLB with the skinned mesh, for the page to
+show, and downloads as BVH, GLB, VRMA and an MP4 rendered with the song; ``web/dances.py``
+keeps the last few dances). ``/ws/live?url=`` dances to a stream,
 shared by everyone who watches it (``web/live.py``); ``/api/live`` lists those streams. The page drives the animation from
 the audio element's clock, so motion and music stay in sync through seeks and pauses.
 
@@ -16,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import math
 import re
 import shutil
@@ -41,6 +46,7 @@ from starlette.websockets import WebSocket
 
 from ..errors import DanceSynthError, InputError
 from ..types import MAX_SEED
+from .dances import DOWNLOADS, FIGURES, RENDER_RETRY_S, VIDEO_SIZE, DanceStore, StoredDance
 from .live import LiveHub, parse_seed, watch
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
@@ -50,6 +56,11 @@ _MEDIA_TYPES = {".ogg": "audio/ogg", ".oga": "audio/ogg", ".opus": "audio/ogg", 
                 ".flac": "audio/flac", ".mp3": "audio/mpeg", ".m4a": "audio/mp4", ".aac": "audio/aac",
                 ".webm": "audio/webm"}
 _UPLOAD_ID = re.compile(r"^[0-9a-f]{32}(\.[a-z0-9]{1,5})?$")
+# What the engine menu says about each of api.ENGINES (cli.py's --engine help, shorter).
+ENGINE_NOTES = {"streaming": "motion graph, segment by segment as the music arrives",
+                "global": "motion graph, the whole song at once",
+                "choreography": "motifs danced with captured moves",
+                "neural": "a learned pose generator"}
 
 
 def bundled_songs() -> list[dict]:
@@ -73,7 +84,8 @@ class UploadStore:
     it has been served (the page fetched it to play along) or ``grace_s`` after its dance was
     done, and in any case ``max_age_s`` after. When every place is taken by uploads that may
     not go yet, ``new_path`` returns None: the server is busy, and says so, rather than
-    delete a song someone is waiting for or let the folder grow.
+    delete a song someone is waiting for or let the folder grow. A song being rendered into
+    a video is ``hold``-ed and stays until it is ``release``-d.
     """
 
     def __init__(self, *, max_files: int = 8, max_age_s: float = 3600.0, grace_s: float = 60.0):
@@ -82,7 +94,8 @@ class UploadStore:
         self.max_age_s = max_age_s
         self.grace_s = grace_s
         self._lock = threading.Lock()
-        self._files: dict[str, dict] = {}  # upload id -> {"t": stored, "done": time or None, "served": bool}
+        # upload id -> {"t": stored, "done": time or None, "served": bool, "holds": videos being rendered}
+        self._files: dict[str, dict] = {}
 
     def new_path(self, filename: str | None) -> tuple[str, Path] | None:
         suffix = Path(filename or "").suffix.lower()
@@ -92,7 +105,7 @@ class UploadStore:
             self._prune(keep=self.max_files - 1)
             if len(self._files) >= self.max_files:
                 return None
-            self._files[key] = {"t": time.time(), "done": None, "served": False}
+            self._files[key] = {"t": time.time(), "done": None, "served": False, "holds": 0}
         return key, self.dir / key
 
     def done(self, key: str) -> None:
@@ -122,9 +135,25 @@ class UploadStore:
             if key in self._files:
                 self._files[key]["served"] = True
 
+    def hold(self, key: str) -> Path | None:
+        """A danced upload's path, kept until ``release``; None if it is gone already."""
+        with self._lock:
+            entry = self._files.get(key)
+            if entry is None or entry["done"] is None or not (self.dir / key).is_file():
+                return None
+            entry["holds"] += 1
+        return self.dir / key
+
+    def release(self, key: str) -> None:
+        with self._lock:
+            if key in self._files:
+                self._files[key]["holds"] -= 1
+
     def _prune(self, keep: int) -> None:
         now = time.time()
         for key, e in sorted(self._files.items(), key=lambda kv: kv[1]["t"]):
+            if e["holds"]:
+                continue
             expired = now - e["t"] > self.max_age_s
             finished = e["done"] is not None and (e["served"] or now - e["done"] > self.grace_s)
             if expired or (len(self._files) > keep and finished):
@@ -198,17 +227,24 @@ SHUTDOWN_S = 5.0     # on Ctrl-C / SIGTERM, wait this long for open connections 
 
 def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dances: int = 2,
                max_waiting_dances: int = 16, max_stored_uploads: int = 8, max_live_streams: int = 2,
-               max_viewer_lag_s: float = MAX_VIEWER_LAG_S, live_realtime: bool = True) -> Starlette:
+               max_viewer_lag_s: float = MAX_VIEWER_LAG_S, live_realtime: bool = True,
+               max_stored_dances: int = 8, max_renders: int = 1, max_waiting_renders: int = 2,
+               video_size: tuple[int, int] = VIDEO_SIZE) -> Starlette:
     """The web app: the page, the bundled songs, and ``POST /api/dance``.
 
     ``database`` is passed to ``dancesynth.dance`` (a folder, a ``MotionDatabase`` or
     None for the bundled one); uploads larger than ``max_upload_mb`` are refused with 413.
     ``max_concurrent_dances`` dance at once and ``max_waiting_dances`` more wait; beyond
     that, or with ``max_stored_uploads`` uploads kept, a dance is refused with 503 and a
-    Retry-After (the page waits that long and asks again).
+    Retry-After (the page waits that long and asks again). The last ``max_stored_dances``
+    dances can be downloaded; ``max_renders`` videos render at once and
+    ``max_waiting_renders`` more wait, beyond that a video is refused with 503 too; videos are
+    ``video_size`` (width, height) pixels.
     """
-    from ..api import list_styles
+    from ..api import ENGINES, DanceConfig, list_styles
     from ..motion.database import MotionDatabase, open_database
+    from ..retarget.character import DEFAULT_CHARACTER
+    from ..retarget.rigs import DESCRIPTIONS, LAYOUTS
 
     if database is not None and not isinstance(database, MotionDatabase):
         database = open_database(database)  # a bad folder is an error now, not at the first dance
@@ -217,7 +253,11 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
     songs = {s["name"]: s for s in bundled_songs()}
     dances = DanceQueue(max_concurrent_dances, max_waiting_dances)
     hub = LiveHub(database, max_streams=max_live_streams, max_lag_s=max_viewer_lag_s, realtime=live_realtime)
+    kept = DanceStore(max_dances=max_stored_dances, max_renders=max_renders, max_waiting_renders=max_waiting_renders,
+                      video_size=video_size)
+    default_engine = DanceConfig().engine
     styles_cache: list = []
+    characters_cache: list = []
 
     async def index(request: Request) -> Response:
         return FileResponse(STATIC_DIR / "index.html", media_type="text/html")
@@ -226,6 +266,17 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
         if not styles_cache:
             styles_cache.extend(await run_in_threadpool(list_styles, database))
         return JSONResponse({"styles": styles_cache})
+
+    async def api_engines(request: Request) -> Response:
+        engines = [{"name": e, "description": ENGINE_NOTES.get(e, "")} for e in ENGINES]
+        return JSONResponse({"engines": engines, "default": default_engine})
+
+    async def api_characters(request: Request) -> Response:
+        if not characters_cache:
+            loaded = await run_in_threadpool(lambda: [_character(n) for n in LAYOUTS])
+            characters_cache.extend({"name": c.name, "description": DESCRIPTIONS.get(c.name, ""),
+                                     "mesh": c.mesh is not None, "joints": c.skeleton.n_joints} for c in loaded)
+        return JSONResponse({"characters": characters_cache, "default": DEFAULT_CHARACTER})
 
     async def api_songs(request: Request) -> Response:
         return JSONResponse({"songs": list(songs.values())})
@@ -271,6 +322,13 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
             seed = parse_seed(seed_text)
             if seed is False:
                 return _error(400, f"seed {seed_text!r} must be a whole number from 0 to {MAX_SEED} (e.g. 7) or empty")
+            engine = _text(form, "engine") or default_engine
+            if engine not in ENGINES:
+                return _error(400, f"unknown engine {engine[:40]!r}; pick one of {', '.join(ENGINES)} (/api/engines)")
+            character = _text(form, "character") or DEFAULT_CHARACTER
+            if character not in LAYOUTS:  # built-ins only: a path would load a file from the server's disk
+                return _error(400, f"unknown character {character[:40]!r}; pick one of {', '.join(LAYOUTS)} "
+                                   "(/api/characters)")
             audio, song_name = _upload(form), _text(form, "song")
             if audio is None and not song_name:
                 return _error(400, "send an audio file ('audio') or the name of a bundled song ('song')")
@@ -288,7 +346,7 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
                 audio_url = f"/api/uploads/{upload_key}"
             else:
                 song_path, audio_url, shown = MUSIC_DIR / song_name, songs[song_name]["url"], song_name
-            result = await dances.run(_dance_json, song_path, style, seed, database)
+            result, made = await dances.run(_make_dance, song_path, style, seed, engine, character, database)
         except DanceSynthError as exc:
             if upload_key:
                 store.discard(upload_key)
@@ -303,8 +361,68 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
             await form.close()
         if upload_key:
             store.done(upload_key)
-        result["audio_url"] = audio_url
+        made.title, made.upload_key = shown, upload_key
+        key = kept.add(made)
+        base = f"/api/dances/{key}"
+        result.update(audio_url=audio_url, dance_id=key, glb_url=f"{base}/dance.glb" if made.has_mesh else None,
+                      downloads={kind: f"{base}/dance.{kind}" for kind in DOWNLOADS}, video_url=f"{base}/video")
         return JSONResponse(result)
+
+    def kept_dance(request: Request) -> StoredDance | Response:
+        dance = kept.get(request.path_params["key"])
+        if dance is None:
+            return _error(404, f"no such dance (the server keeps the last {kept.max_dances} dances; dance it again)")
+        return dance
+
+    async def api_dance_file(request: Request) -> Response:
+        """``dance.bvh|glb|vrma`` made on first request; ``dance.mp4?figure=`` once rendered (``api_video``)."""
+        kind = request.path_params["kind"]
+        if kind not in DOWNLOADS and kind != "mp4":
+            return _error(404, f"no such download; the formats are {', '.join(DOWNLOADS)} and mp4")
+        dance = kept_dance(request)
+        if isinstance(dance, Response):
+            return dance
+        if kind == "mp4":
+            figure = _video_figure(request, dance)
+            render = dance.renders.get(figure)
+            if render is None or render.state != "done" or not render.path.is_file():
+                return _error(404, "this video is not rendered (yet): POST to the dance's video_url first")
+            return FileResponse(render.path, media_type="video/mp4", filename=dance.file_name("mp4", figure))
+        try:
+            data = await run_in_threadpool(dance.encoded, kind)
+        except DanceSynthError as exc:
+            return _error(400 if isinstance(exc, InputError) else 500, f"cannot make the {kind.upper()}: {exc}")
+        return Response(data, media_type=DOWNLOADS[kind],
+                        headers={"Content-Disposition": f'attachment; filename="{dance.file_name(kind)}"'})
+
+    async def api_video(request: Request) -> Response:
+        """POST starts rendering the dance's MP4 with its song (or joins the render under way); GET and
+        POST both answer how far it has got, with the file's URL once it is done."""
+        dance = kept_dance(request)
+        if isinstance(dance, Response):
+            return dance
+        figure = _video_figure(request, dance)
+        if figure is None:
+            return _error(400, f"figure must be one of {', '.join(FIGURES)}")
+        render = dance.renders.get(figure)
+        if request.method == "POST" and (render is None or render.state == "error"):
+            song, release = dance.song_path, lambda: None
+            if dance.upload_key:  # an upload is kept while its video renders
+                song = store.hold(dance.upload_key)
+                if song is None:
+                    return _error(410, "the uploaded song is no longer kept on the server; dance it again "
+                                       "to make a video")
+                release = functools.partial(store.release, dance.upload_key)
+            render = kept.start_render(request.path_params["key"], dance, figure, song, release)
+            if render is None:
+                return _error(503, f"the server is busy rendering other videos; try again in {RENDER_RETRY_S} s",
+                              headers={"Retry-After": str(RENDER_RETRY_S)})
+        if render is None:
+            return _error(404, "no video of this dance is being made: POST here to start one")
+        answer = render.status()
+        if render.state == "done":
+            answer["url"] = f"/api/dances/{request.path_params['key']}/dance.mp4?figure={figure}"
+        return JSONResponse(answer, status_code=202 if render.state in ("queued", "rendering") else 200)
 
     async def ws_live(ws: WebSocket) -> None:
         await ws.accept()
@@ -326,6 +444,10 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
         Route("/api/songs/{name}", api_song),
         Route("/api/uploads/{key}", api_upload),
         Route("/api/dance", api_dance, methods=["POST"]),
+        Route("/api/engines", api_engines),
+        Route("/api/characters", api_characters),
+        Route("/api/dances/{key}/dance.{kind}", api_dance_file),
+        Route("/api/dances/{key}/video", api_video, methods=["GET", "POST"]),
         Route("/api/live", api_live),
         WebSocketRoute("/ws/live", ws_live),
         Mount("/static", app=StaticFiles(directory=STATIC_DIR), name="static"),
@@ -336,15 +458,17 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
             yield
         finally:
             hub.close()
+            kept.close()
             store.close()
 
     app = Starlette(routes=routes, middleware=[Middleware(GZipMiddleware, minimum_size=1024)],
                     exception_handlers={Exception: on_error, HTTPException: on_http_error}, lifespan=lifespan)
     app.state.uploads = store
+    app.state.dances = kept
     return app
 
 
-_FIELDS = {"audio": "a file", "song": "text", "style": "text", "seed": "text"}
+_FIELDS = {"audio": "a file", "song": "text", "style": "text", "seed": "text", "engine": "text", "character": "text"}
 
 
 def _form_problem(form) -> str:
@@ -379,17 +503,44 @@ def _save_upload(upload: UploadFile, path: Path) -> None:
         shutil.copyfileobj(upload.file, fh, 1 << 20)
 
 
-def _dance_json(song_path: Path, style: str | None, seed: int | None, database) -> dict:
+def _video_figure(request: Request, dance: StoredDance) -> str | None:
+    """The figure a video draws (``?figure=``, default the character); a rig without a mesh is drawn as
+    the stick figure whatever is asked, so both names share one render. None when it is no figure."""
+    figure = request.query_params.get("figure") or "character"
+    if figure not in FIGURES:
+        return None
+    return figure if dance.has_mesh else "stick"
+
+
+@functools.lru_cache(maxsize=None)
+def _character(name: str):
+    """A built-in character (``retarget.rigs.LAYOUTS``), loaded once: they never change."""
+    from ..retarget.character import load_character
+
+    return load_character(name)
+
+
+def _make_dance(song_path: Path, style: str | None, seed: int | None, engine: str, character: str,
+                database) -> tuple[dict, StoredDance]:
+    """Dance, move the dance onto ``character``, and describe it for the page. Runs in a worker thread."""
     from ..api import dance
-    from ..io.bvh_writer import format_bvh
+    from ..retarget.solve import retarget
 
-    clip = dance(song_path, style=style, seed=seed, database=database)
+    clip = dance(song_path, style=style, seed=seed, engine=engine, database=database)
+    target = _character(character)
+    moved = retarget(clip, target)
+    made = StoredDance(moved, target, song_path, title=song_path.name)
+    if made.has_mesh:
+        made.encoded("glb")  # the page asks for it next: make it here, in the dance's turn
     s = clip.provenance.summary
-    return {"bvh": format_bvh(clip), "fps": clip.fps, "frames": clip.n_frames,
-            "duration_s": float(s["duration_s"]), "tempo_bpm": float(s["tempo_bpm"]),
-            "beats": [round(float(t), 4) for t in clip.provenance.music_beat_times_s],
-            "style": s["style"], "default_tempo": bool(s["default_tempo"])}
-
+    sections = [{"start_s": round(float(x["start_s"]), 4), "level": x["level"]} for x in s.get("sections", [])]
+    result = {"bvh": made.encoded("bvh").decode("utf-8"), "fps": moved.fps, "frames": moved.n_frames,
+              "duration_s": float(s["duration_s"]), "tempo_bpm": float(s["tempo_bpm"]),
+              "beats": [round(float(t), 4) for t in clip.provenance.music_beat_times_s],
+              "style": s["style"], "default_tempo": bool(s["default_tempo"]), "engine": s["engine"],
+              "character": target.name, "mesh": made.has_mesh, "joints": list(moved.skeleton.names),
+              "sections": sections, "beats_per_bar": int(s["beats_per_bar"]) if s.get("beats_per_bar") else None}
+    return result, made
 
 
 def serve(host: str = "127.0.0.1", port: int = 8000, *, log_level: str = "info", **app_options) -> None:

@@ -1,15 +1,19 @@
 // The dancesynth page: ask the server for a dance, play the song, pose the character
 // from the audio element's clock (so seeking and pausing keep motion and music in sync),
-// and flash a ring on the floor on every music beat.
+// and flash a ring on the floor on every music beat. The character is the skinned mesh the
+// server sends as GLB; the stick figure (from the BVH, on the same rig) is the other view,
+// and the only one for a rig without a mesh and for live streams.
 import * as THREE from 'three';
 import { BVHLoader } from 'three/addons/loaders/BVHLoader.js';
+import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 
 const $ = (id) => document.getElementById(id);
 const audio = $('audio');
 const statusLine = $('status');
 // What the page is doing, for people debugging it and for the browser test.
-const state = (window.dancesynth = { state: 'loading', error: null, timings: {}, frames: 0, beats: 0, retries: 0 });
+const state = (window.dancesynth = { state: 'loading', error: null, timings: {}, frames: 0, beats: 0, retries: 0,
+	dance: null, view: null, playback: null, video: null });
 
 function setStatus(text, isError = false) {
 	statusLine.textContent = text;
@@ -23,9 +27,9 @@ renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
 const scene = new THREE.Scene();
 scene.background = new THREE.Color(0x1d2028);
 const camera = new THREE.PerspectiveCamera(45, 1, 0.05, 100);
-camera.position.set(2.2, 1.7, 3.6);
+camera.position.set(1.9, 1.55, 3.1);
 const controls = new OrbitControls(camera, canvas);
-controls.target.set(0, 0.95, 0);
+controls.target.set(0, 0.9, 0);
 controls.update();
 scene.add(new THREE.HemisphereLight(0xffffff, 0x404050, 2.0));
 const sun = new THREE.DirectionalLight(0xffffff, 1.5);
@@ -46,7 +50,9 @@ const figureMaterial = new THREE.MeshLambertMaterial({ color: 0xff8c1a });
 const limbGeometry = new THREE.CylinderGeometry(1, 1, 1, 10); // scaled per bone
 const jointGeometry = new THREE.SphereGeometry(1, 12, 8);
 
-let dance = null; // { root, bones, limbs, mixer, action, duration, beats, hips }
+// What is on stage: { figures: { stick, character? }, beats, sections, duration, offset, result? }.
+// A figure is { group, hips, mixer, action, duration, limbs } (limbs: the stick figure's cylinders).
+let dance = null;
 
 function resize() {
 	const w = canvas.clientWidth, h = canvas.clientHeight;
@@ -57,9 +63,28 @@ function resize() {
 	}
 }
 
-function buildFigure(bvhText) {
+// A figure whose pose is set from the music clock: one animation, never played by the mixer's own clock.
+function animated(group, hips, clip, limbs = []) {
+	const mixer = new THREE.AnimationMixer(group);
+	const action = mixer.clipAction(clip);
+	action.setLoop(THREE.LoopOnce, 1);
+	action.clampWhenFinished = true;
+	action.play();
+	return { group, hips, mixer, action, duration: clip.duration, limbs };
+}
+
+// A track is named "bone.property", and the mixer takes ':' and '.' for path separators: a rig's bone named
+// "mixamorig:Hips" would never be found (the figure stood in its rest pose). Name the bones as the mixer reads them.
+const mixerName = THREE.PropertyBinding.sanitizeNodeName;
+
+function buildStick(bvhText) {
 	const result = new BVHLoader().parse(bvhText);
 	const bones = result.skeleton.bones;
+	for (const bone of bones) bone.name = mixerName(bone.name);
+	for (const track of result.clip.tracks) {
+		const dot = track.name.lastIndexOf('.');
+		track.name = mixerName(track.name.slice(0, dot)) + track.name.slice(dot);
+	}
 	const root = bones[0];
 	const group = new THREE.Group();
 	group.add(root);
@@ -82,27 +107,62 @@ function buildFigure(bvhText) {
 		limbs.push({ mesh: sphere, bone: head, parent: null });
 		group.add(sphere);
 	}
-	const mixer = new THREE.AnimationMixer(root);
-	const action = mixer.clipAction(result.clip);
-	action.setLoop(THREE.LoopOnce, 1);
-	action.clampWhenFinished = true;
-	action.play();
-	return { group, root, bones, limbs, mixer, action, duration: result.clip.duration };
+	return animated(group, root, result.clip, limbs);
+}
+
+async function buildCharacter(glbUrl) {
+	const response = await fetch(glbUrl);
+	if (!response.ok) await readJSON(response); // throws the server's message
+	const gltf = await new GLTFLoader().parseAsync(await response.arrayBuffer(), '');
+	if (!gltf.animations.length) throw new Error('the character has no animation');
+	let hips = null;
+	gltf.scene.traverse((o) => {
+		// A skinned mesh's bounds are those of its rest pose: never cull it as it dances away from them.
+		if (o.isSkinnedMesh) { o.frustumCulled = false; hips = hips || o.skeleton.bones[0]; }
+	});
+	return animated(gltf.scene, hips || gltf.scene, gltf.animations[0]);
+}
+
+let wantedFigure = 'character'; // what the user chose to see
+
+// The figure shown: the character unless the stick figure is chosen or there is no character.
+function shownFigure() {
+	if (!dance) return null;
+	return ($('figure').value === 'character' && dance.figures.character) || dance.figures.stick;
+}
+
+function showDance(next) {
+	if (dance) for (const f of Object.values(dance.figures)) scene.remove(f.group);
+	dance = next;
+	for (const f of Object.values(dance.figures)) scene.add(f.group);
+	updateView();
+}
+
+// Without a character (a rig without a mesh, a live stream) the stick figure only, until a dance with
+// one brings back the choice made.
+function offerFigures(hasCharacter) {
+	$('figure').options[0].disabled = !hasCharacter;
+	$('figure').value = hasCharacter ? wantedFigure : 'stick';
+	updateView();
+}
+
+function updateView() {
+	const shown = shownFigure();
+	if (dance) for (const f of Object.values(dance.figures)) f.group.visible = f === shown;
+	state.view = shown ? (shown === dance.figures.stick ? 'stick' : 'character') : null;
 }
 
 const _a = new THREE.Vector3(), _b = new THREE.Vector3(), _dir = new THREE.Vector3();
 const _up = new THREE.Vector3(0, 1, 0);
 
-function poseAt(t) {
-	const d = dance;
-	t -= d.offset || 0; // a live figure holds only the last part of the stream
+function poseAt(fig, t) {
 	// Set the action's time directly: the audio clock is the only clock.
-	d.action.paused = false;
-	d.action.enabled = true;
-	d.action.time = Math.min(Math.max(t, 0), Math.max(d.duration - 1e-4, 0));
-	d.mixer.update(0);
-	d.group.updateMatrixWorld(true);
-	for (const { mesh, bone, parent } of d.limbs) {
+	fig.action.paused = false;
+	fig.action.enabled = true;
+	fig.action.time = Math.min(Math.max(t, 0), Math.max(fig.duration - 1e-4, 0));
+	fig.mixer.update(0);
+	fig.group.updateMatrixWorld(true);
+	for (const { mesh, bone, parent } of fig.limbs) {
 		bone.getWorldPosition(_b);
 		if (!parent) {
 			mesh.position.copy(_b).addScaledVector(_up, 0.08);
@@ -115,7 +175,7 @@ function poseAt(t) {
 		if (len > 1e-6) mesh.quaternion.setFromUnitVectors(_up, _dir.divideScalar(len));
 	}
 	// Follow the dancer: the ring stays under the hips, the camera keeps its offset.
-	d.root.getWorldPosition(_a);
+	fig.hips.getWorldPosition(_a);
 	ring.position.x = _a.x;
 	ring.position.z = _a.z;
 	const dx = (_a.x - controls.target.x) * 0.05, dz = (_a.z - controls.target.z) * 0.05;
@@ -123,12 +183,12 @@ function poseAt(t) {
 	camera.position.x += dx; camera.position.z += dz;
 }
 
-// Index of the last beat at or before t (binary search).
-function lastBeat(beats, t) {
-	let lo = 0, hi = beats.length - 1, found = -1;
+// Index of the last value at or before t in a sorted list (binary search), -1 if none.
+function lastAtOrBefore(values, t) {
+	let lo = 0, hi = values.length - 1, found = -1;
 	while (lo <= hi) {
 		const mid = (lo + hi) >> 1;
-		if (beats[mid] <= t) { found = mid; lo = mid + 1; } else hi = mid - 1;
+		if (values[mid] <= t) { found = mid; lo = mid + 1; } else hi = mid - 1;
 	}
 	return found;
 }
@@ -147,22 +207,54 @@ function frame() {
 		}
 		live.last = now;
 	}
-	if (dance) {
+	const fig = shownFigure();
+	if (fig) {
 		const t = live ? Math.max(live.time, 0) : audio.currentTime || 0;
-		poseAt(t);
-		const i = lastBeat(dance.beats, t);
+		poseAt(fig, t - (dance.offset || 0)); // a live figure holds only the last part of the stream
+		const i = lastAtOrBefore(dance.beats, t);
 		const since = i >= 0 ? t - dance.beats[i] : Infinity;
 		const pulse = Math.exp(-since / 0.12); // 1 on the beat, fading over ~0.3 s
 		ring.material.opacity = 0.15 + 0.8 * pulse;
 		ring.material.color.setHSL(0.55 - 0.1 * pulse, 0.9, 0.45 + 0.3 * pulse);
 		ring.scale.setScalar(1 + 0.25 * pulse);
+		if (!live) followPlayback();
 	}
 	controls.update();
 	renderer.render(scene, camera);
 	requestAnimationFrame(frame);
 }
 
-// ---- controls -------------------------------------------------------------------------
+// ---- the status line follows the music -------------------------------------------------
+function clock(t) {
+	const m = Math.floor(t / 60);
+	return `${m}:${(t - 60 * m).toFixed(1).padStart(4, '0')}`;
+}
+
+// Where the song is (time, beat, section) and whether it plays; the status line says so as it changes.
+function followPlayback() {
+	if (!dance || !dance.result || state.state !== 'ready') return;
+	const t = audio.currentTime || 0;
+	const mode = audio.ended ? 'finished' : !audio.paused ? 'playing' : t > 0 ? 'paused' : 'ready';
+	const beat = lastAtOrBefore(dance.beats, t) + 1;
+	const section = lastAtOrBefore(dance.sections.map((s) => s.start_s), t) + 1;
+	const where = [`${clock(t)} / ${clock(dance.duration)}`,
+		beat ? `beat ${beat} of ${dance.beats.length}` : 'before the first beat'];
+	if (section && dance.sections.length > 1) {
+		where.push(`section ${section} of ${dance.sections.length} (${dance.sections[section - 1].level} level)`);
+	} else if (section) {
+		where.push(`one section (${dance.sections[0].level} level)`);
+	}
+	const text = {
+		ready: `Ready: press play (${clock(dance.duration)}, ${dance.beats.length} beats)`,
+		playing: `Playing ${where.join(' · ')}`,
+		paused: `Paused at ${where.join(' · ')}`,
+		finished: `Finished: ${clock(dance.duration)} danced to ${dance.beats.length} beats — press play to watch again`,
+	}[mode];
+	state.playback = { state: mode, time: t, beat, section, text };
+	if (statusLine.textContent !== text) setStatus(text);
+}
+
+// ---- talking to the server -------------------------------------------------------------
 async function readJSON(response) {
 	let body = null;
 	try { body = await response.json(); } catch { body = null; }
@@ -174,32 +266,54 @@ async function getJSON(url, options) {
 	return readJSON(await fetch(url, options));
 }
 
+const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
+
 // A busy server answers 503 (or 429) with Retry-After: wait that long, plus a little so that
 // pages told the same do not all come back at once, and ask again, for at most RETRY_FOR_MS.
+// onWait(ms) is told before each wait, onWait(0) when asking again.
 const RETRY_FOR_MS = 300000;
 
-async function postDance(form) {
+async function fetchRetrying(url, options, onWait) {
 	const giveUp = performance.now() + RETRY_FOR_MS;
 	for (let tries = 1; ; tries++) {
-		const response = await fetch('/api/dance', { method: 'POST', body: form });
+		const response = await fetch(url, options);
 		const wait = Number(response.headers.get('Retry-After')) * 1000 * (1 + 0.25 * Math.random());
 		if (![429, 503].includes(response.status) || !(wait > 0) || performance.now() + wait > giveUp) {
 			return readJSON(response);
 		}
 		state.retries = tries;
-		setStatus(`The server is busy; asking again in ${Math.round(wait / 1000)} s…`);
-		await new Promise((resolve) => setTimeout(resolve, wait));
-		setStatus('Listening to the music and choreographing…');
+		onWait(wait);
+		await sleep(wait);
+		onWait(0); // asking again
 	}
 }
 
+function postDance(form) {
+	return fetchRetrying('/api/dance', { method: 'POST', body: form }, (wait) => setStatus(wait
+		? `The server is busy; asking again in ${Math.round(wait / 1000)} s…`
+		: 'Listening to the music and choreographing…'));
+}
+
 async function loadChoices() {
-	const [songs, styles] = await Promise.all([getJSON('/api/songs'), getJSON('/api/styles')]);
+	const [songs, styles, engines, characters] = await Promise.all(
+		['/api/songs', '/api/styles', '/api/engines', '/api/characters'].map((url) => getJSON(url)));
 	for (const s of songs.songs) $('song').add(new Option(s.title, s.name));
 	for (const s of styles.styles) {
 		const tempo = `${Math.round(s.tempo_min_bpm)}-${Math.round(s.tempo_max_bpm)} bpm`;
 		$('style').add(new Option(`${s.name} (${s.genre}, ${tempo})`, s.name));
 	}
+	for (const e of engines.engines) {
+		const option = new Option(e.name + (e.name === engines.default ? ' (default)' : ''), e.name);
+		option.title = e.description;
+		$('engine').add(option);
+	}
+	$('engine').value = engines.default;
+	for (const c of characters.characters) {
+		const option = new Option(c.mesh ? c.name : `${c.name} rig (stick figure)`, c.name);
+		option.title = c.description;
+		$('character').add(option);
+	}
+	$('character').value = characters.default;
 	if (songs.songs.length) $('song').value = songs.songs[0].name;
 }
 
@@ -211,8 +325,7 @@ async function requestDance(event) {
 	else if ($('song').value) form.append('song', $('song').value);
 	else if (file) form.append('audio', file);
 	else { setStatus('Pick a song or choose an audio file.', true); return; }
-	form.append('style', $('style').value);
-	form.append('seed', $('seed').value);
+	for (const field of ['style', 'seed', 'engine', 'character']) form.append(field, $(field).value);
 	$('dance').disabled = true;
 	state.state = 'dancing';
 	setStatus('Listening to the music and choreographing…');
@@ -220,20 +333,28 @@ async function requestDance(event) {
 	try {
 		const result = await postDance(form);
 		state.timings.dance_ms = performance.now() - t0;
+		const figures = { stick: buildStick(result.bvh) };
+		if (result.glb_url) {
+			setStatus('Dressing the character…');
+			figures.character = await buildCharacter(result.glb_url);
+		}
+		state.timings.figures_ms = performance.now() - t0 - state.timings.dance_ms;
 		stopLive();
-		if (dance) scene.remove(dance.group);
-		dance = buildFigure(result.bvh);
-		dance.beats = result.beats;
-		scene.add(dance.group);
+		showDance({ figures, beats: result.beats, sections: result.sections, duration: result.duration_s, result });
+		offerFigures(Boolean(figures.character));
+		offerDownloads(result);
 		audio.pause();
 		audio.src = result.audio_url;
 		audio.currentTime = 0;
 		state.frames = result.frames;
 		state.beats = result.beats.length;
+		state.dance = { id: result.dance_id, engine: result.engine, character: result.character, mesh: result.mesh,
+			style: result.style, joints: result.joints };
+		$('info').textContent = `${result.style} at ${result.tempo_bpm.toFixed(1)} bpm, ${result.beats.length} beats, ` +
+			`${result.duration_s.toFixed(1)} s · ${result.engine} engine · ${result.character}` +
+			(result.mesh ? '' : ' rig') + (result.default_tempo ? ' · no clear beat: a steady default tempo' : '');
 		state.state = 'ready';
-		setStatus(`${result.style} at ${result.tempo_bpm.toFixed(1)} bpm, ${result.beats.length} beats, ` +
-			`${result.duration_s.toFixed(1)} s — press play` +
-			(result.default_tempo ? ' (no clear beat: a steady default tempo)' : ''));
+		followPlayback();
 		audio.play().catch(() => {}); // browsers may refuse autoplay; the play button works
 	} catch (err) {
 		state.state = 'error';
@@ -241,6 +362,72 @@ async function requestDance(event) {
 		setStatus(`Could not dance: ${state.error}`, true);
 	} finally {
 		$('dance').disabled = false;
+	}
+}
+
+// ---- downloads -------------------------------------------------------------------------
+// A 10-minute song's video takes minutes on a small server, and a render may wait for others: give up
+// only after RENDER_WAIT_MS in all or when a render has not moved on for STALL_MS.
+const RENDER_WAIT_MS = 60 * 60 * 1000;
+const STALL_MS = 2 * 60 * 1000;
+const POLL_MS = 500;
+
+// The links to the dance's files, or none (null: a live dance has no files).
+function offerDownloads(result) {
+	for (const kind of ['bvh', 'glb', 'vrma']) {
+		const link = $(`dl-${kind}`);
+		if (result) link.href = result.downloads[kind];
+		else link.removeAttribute('href');
+		link.setAttribute('aria-disabled', String(!result));
+	}
+	state.video = null;
+	$('dl-mp4').disabled = !result;
+	$('dl-mp4').textContent = 'MP4';
+	$('dl-mp4').title = '';
+}
+
+// The server renders the MP4 with the song (a while for a long song): start it, show how far it has
+// got on the button, and download it when it is done.
+async function downloadVideo() {
+	const result = dance && dance.result;
+	if (!result) return;
+	const button = $('dl-mp4');
+	const url = `${result.video_url}?figure=${state.view === 'stick' ? 'stick' : 'character'}`;
+	const mine = result;
+	const show = (text) => { if (dance && dance.result === mine) button.textContent = text; };
+	button.disabled = true;
+	state.video = { state: 'starting', progress: 0, error: null };
+	show('MP4: starting…');
+	try {
+		const giveUp = performance.now() + RENDER_WAIT_MS;
+		let job = await fetchRetrying(url, { method: 'POST' }, (wait) =>
+			show(wait ? `MP4: the server is busy, again in ${Math.round(wait / 1000)} s` : 'MP4: starting…'));
+		let moved = { at: performance.now(), key: '' };
+		while (['queued', 'rendering'].includes(job.state)) {
+			state.video = { state: job.state, progress: job.progress, error: null };
+			show(job.state === 'queued' ? 'MP4: waiting for a turn…' : `MP4: rendering… ${Math.round(100 * job.progress)}%`);
+			const key = `${job.state} ${job.frames_done}`;
+			if (key !== moved.key) moved = { at: performance.now(), key };
+			if (job.state === 'rendering' && performance.now() - moved.at > STALL_MS) {
+				throw new Error('the render stopped moving on; try again later');
+			}
+			if (performance.now() > giveUp) throw new Error('the video took too long; try again later');
+			await sleep(POLL_MS);
+			job = await getJSON(url);
+		}
+		if (job.state !== 'done') throw new Error(job.error || `the video ended as ${job.state}`);
+		state.video = { state: 'done', progress: 1, error: null, url: job.url };
+		show('MP4 ✓');
+		const link = document.createElement('a');
+		link.href = job.url;
+		link.download = '';
+		link.click();
+	} catch (err) {
+		state.video = { state: 'error', progress: 0, error: String(err.message || err) };
+		show('MP4 (failed: try again)');
+		button.title = state.video.error;
+	} finally {
+		if (dance && dance.result === mine) button.disabled = false;
 	}
 }
 
@@ -281,11 +468,7 @@ function liveFrames(startFrame, rows) {
 	if (drop > 0) { live.rows.splice(0, drop); live.base += drop; }
 	const text = `${live.hierarchy}\nMOTION\nFrames: ${live.rows.length}\nFrame Time: ${(1 / live.fps).toFixed(8)}\n` +
 		live.rows.join('\n') + '\n';
-	if (dance) scene.remove(dance.group);
-	dance = buildFigure(text);
-	dance.offset = live.base / live.fps;
-	dance.beats = live.beats;
-	scene.add(dance.group);
+	showDance({ figures: { stick: buildStick(text) }, offset: live.base / live.fps, beats: live.beats, sections: [] });
 	state.live.frames = startFrame + rows.length;
 }
 
@@ -304,6 +487,9 @@ function startLive(event) {
 	state.live = { state: 'connecting', frames: 0, beats: 0, time: 0, heard_s: 0, error: null, starved_s: 0,
 		playing_s: 0, delay_s: null };
 	setStatus('Connecting to the stream…');
+	$('info').textContent = 'Live: the stick figure on the captured skeleton';
+	offerFigures(false);
+	offerDownloads(null);
 	const mine = live;
 	ws.onmessage = (ev) => {
 		if (live !== mine) return;
@@ -346,6 +532,8 @@ $('live-controls').addEventListener('submit', startLive);
 $('stop-live').addEventListener('click', () => { stopLive(); setStatus('Stopped.'); });
 audio.addEventListener('play', () => { if (live) stopLive(); });
 $('controls').addEventListener('submit', requestDance);
+$('figure').addEventListener('change', () => { wantedFigure = $('figure').value; updateView(); });
+$('dl-mp4').addEventListener('click', downloadVideo);
 $('file').addEventListener('change', () => { if ($('file').files.length) $('song').value = ''; });
 const tLoad = performance.now();
 loadChoices().then(() => {
