@@ -24,8 +24,13 @@ from .types import DEFAULT_FPS, SEGMENT_S
               help="A database folder or a folder of BVH files (default: the bundled database).")
 @click.option("--follow-signature", is_flag=True, help="Also keep the genre's motif signature as the dance goes.")
 @click.option("--fast", is_flag=True, help="Read a file as fast as it decodes instead of at real-time pace.")
+@click.option("--character", default=None, metavar="NAME|FILE",
+              help="Who dances (as for 'dance'; default mannequin; 'source': the style's own skeleton).")
+@click.option("--bone-map", type=click.Path(dir_okay=False, path_type=Path),
+              help="TOML file naming your character's humanoid bones (as for 'dance').")
 @click.option("-q", "--quiet", is_flag=True, help="Only the summary, no line per segment.")
-def stream(source, output, segment_seconds, style, fps, seed, database, follow_signature, fast, quiet):
+def stream(source, output, segment_seconds, style, fps, seed, database, follow_signature, fast, character, bone_map,
+           quiet):
     """Dance to SOURCE as it arrives: an audio file (played at real-time pace), '-' for standard input,
     or an http(s) URL of an audio stream. Motion is synthesised segment by segment (Xu et al.'s double
     buffer) and appended to the BVH as it goes."""
@@ -33,7 +38,14 @@ def stream(source, output, segment_seconds, style, fps, seed, database, follow_s
     from .live.runtime import LiveConfig, run_live
     from .live.sources import AudioSource, broke_off
 
+    from .retarget import SOURCE, SegmentRetargeter
+    from .retarget.character import DEFAULT_CHARACTER, load_character
+
     bvh_output(output)
+    if (character or DEFAULT_CHARACTER) == SOURCE:
+        on_character = None
+    else:
+        on_character = SegmentRetargeter(load_character(character or DEFAULT_CHARACTER, bone_map=bone_map))
 
     def report(r):
         if not quiet:
@@ -45,7 +57,8 @@ def stream(source, output, segment_seconds, style, fps, seed, database, follow_s
     config = LiveConfig(segment_s=segment_seconds, style=style, fps=fps, seed=seed, database=database,
                         follow_signature=follow_signature)
     with AudioSource(source, realtime=not fast) as src, CompleteBVHWriter(output) as writer:
-        summary = run_live(src, writer.append, config=config, on_report=report, realtime=not fast)
+        sink = writer.append if on_character is None else (lambda clip: writer.append(on_character(clip)))
+        summary = run_live(src, sink, config=config, on_report=report, realtime=not fast)
     if summary["frames"] == 0:
         raise InputError(f"{source}: the stream ended before a single segment could be danced")
     died = broke_off(src)

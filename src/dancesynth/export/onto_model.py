@@ -1,7 +1,8 @@
 """The dance added to the user's own glTF / GLB / VRM model: their file, plus one animation named "dance".
 
-Everything in the file is kept (meshes, materials, VRM extensions, their own animations); the
-dance's keyframes are appended to its binary buffer and a new animation drives the nodes the
+Everything in the file is kept (meshes, materials, VRM extensions, their own animations, after
+ours: players play the first); the dance's keyframes are appended to its binary buffer and a new
+animation drives the nodes the
 character was loaded from (``Character.nodes``): a rotation channel for every joint and a
 translation channel for the hips. The clip is in the character's world frame and metres
 (``retarget.gltf_character``), so the hips' rotation and translation are taken back into the

@@ -62,8 +62,9 @@ class GlbBuilder(GlbBlob):
                                                interpolation="LINEAR"))
             channels.append(g.AnimationChannel(sampler=len(samplers) - 1,
                                                target=g.AnimationChannelTarget(node=node, path=path)))
-        self.gltf.animations = (self.gltf.animations or []) + [g.Animation(name=name, samplers=samplers,
-                                                                           channels=channels)]
+        # First: players (three.js examples, model viewers) play a file's first animation.
+        self.gltf.animations = [g.Animation(name=name, samplers=samplers, channels=channels)] + \
+            (self.gltf.animations or [])
 
     def glb(self) -> bytes:
         self.gltf.buffers = [self.g.Buffer(byteLength=len(self.data))]

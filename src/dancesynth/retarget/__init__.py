@@ -23,3 +23,23 @@ def on_character(clip, character="mannequin", *, bone_map=None):
         return clip, source_character(clip.skeleton)
     target = load_character(character, bone_map=bone_map)
     return retarget(clip, target), target
+
+
+class SegmentRetargeter:
+    """Retargets a stream's segments one by one onto one character, on one floor: the source's
+    standing height is measured on the first segment and kept (each segment measured on its own
+    would move the floor between segments)."""
+
+    def __init__(self, character):
+        self.character = character
+        self._bones = None
+        self._ground = None
+
+    def __call__(self, clip):
+        from .humanoid import find_bones
+        from .solve import retarget, source_ground
+
+        if self._bones is None:
+            self._bones = find_bones(clip.skeleton, what="the dance's skeleton")
+            self._ground = source_ground(clip, self._bones)
+        return retarget(clip, self.character, self._bones, source_ground=self._ground)

@@ -36,8 +36,13 @@ REACH_MAX = 0.9999        # ... and a leg is never solved straighter than this
 DROP_SMOOTH_S = 0.15      # the hips sink to let the legs reach over about this long   # the source's ankle height when standing: a low percentile, robust to a glitch
 
 
-def retarget(clip: MotionClip, character: Character, source_bones: dict[str, int] | None = None) -> MotionClip:
-    """``clip`` danced by ``character``: a MotionClip on ``character.skeleton`` with the same frames."""
+def retarget(clip: MotionClip, character: Character, source_bones: dict[str, int] | None = None, *,
+             source_ground: float | None = None) -> MotionClip:
+    """``clip`` danced by ``character``: a MotionClip on ``character.skeleton`` with the same frames.
+
+    ``source_ground``: the source's standing ankle height, when known (a stream's segments share
+    one, so the floor does not move between them); by default measured on ``clip``.
+    """
     src_bones = source_bones or find_bones(clip.skeleton, what="the dance's skeleton")
     tgt = character.skeleton
     tgt_bones = character.bones
@@ -57,7 +62,7 @@ def retarget(clip: MotionClip, character: Character, source_bones: dict[str, int
                           g_src, p_src, p_src_rest, g_tgt_rest, p_tgt_rest)
 
     scale = leg_length(p_tgt_rest, tgt_bones) / leg_length(p_src_rest, src_bones)
-    src_ground = _ground(p_src, src_bones)
+    src_ground = _ground(p_src, src_bones) if source_ground is None else source_ground
     tgt_ground = character.ankle_ground if character.ankle_ground is not None else _ground(p_tgt_rest[None],
                                                                                             tgt_bones)
     pos = _positions(g, np.zeros((clip.n_frames, 3)), tgt)
@@ -137,6 +142,12 @@ def _global_rotations(n_frames, character, pairs, ends, src_bones, tgt_bones, al
             want = p_src[:, src_bones[e]] - p_src[:, s]
             g[:, j] = rot.mul(_rotation_between(now, want), g[:, j])
     return g
+
+
+def source_ground(clip: MotionClip, bones: dict[str, int]) -> float:
+    """The standing ankle height of ``clip`` (for ``retarget(..., source_ground=)``)."""
+    return _ground(fk(clip.local_rot, clip.root_pos, clip.skeleton.offsets, clip.skeleton.parents,
+                      clip.local_pos)[1], bones)
 
 
 def _ground(positions: np.ndarray, bones: dict[str, int]) -> float:
