@@ -95,6 +95,7 @@ def test_mp4_has_h264_video_and_aac_audio_of_the_songs_length(rendered, dance_cl
     assert float(a.get("start_time", 0)) == pytest.approx(0.0, abs=0.03)
     assert result["duration_s"] == pytest.approx(dance_clip.n_frames / 30.0)
     assert result["fps"] == 30.0 and result["audio"] is True and result["seconds"] > 0
+    assert result["figure"] == "stick"  # no character given: the stick figure (tests/test_render_character.py)
 
 
 def test_frames_show_the_dancer_moving(rendered):

@@ -84,19 +84,42 @@ def stream(source, output, segment_seconds, style, fps, seed, database, follow_s
 @click.option("--width", type=int, default=960, show_default=True)
 @click.option("--height", type=int, default=540, show_default=True)
 @click.option("--fps", type=float, default=None, help="Video frame rate (default: the dance's).")
+@click.option("--character", default=None, metavar="NAME|FILE",
+              help="Who dances in the video: a built-in or your .glb/.gltf/.vrm/.bvh (default: the mannequin).")
+@click.option("--bone-map", type=click.Path(dir_okay=False, path_type=Path),
+              help="TOML file naming your character's humanoid bones (as for 'dance').")
+@click.option("--figure", type=click.Choice(["character", "stick"]), default="character", show_default=True,
+              help="Draw the character's skinned mesh, or a stick figure of the dance's own skeleton.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
-def render(dance_path, song, output, width, height, fps, quiet):
+def render(dance_path, song, output, width, height, fps, character, bone_map, figure, quiet):
     """Render DANCE.bvh as an MP4 video (H.264) with SONG muxed in sync (AAC)."""
     from .export.video import render_video_files
+    from .retarget import on_character
+    from .retarget.character import DEFAULT_CHARACTER, load_character
 
     output = output or Path(dance_path.stem + ".mp4")
+    target = None
+    if figure == "character" or character is not None:   # loaded first: a bad character fails before work
+        target = load_character(character or DEFAULT_CHARACTER, bone_map=bone_map)
+
+    def dress(clip):
+        if target is None:
+            return clip, None
+        try:
+            return on_character(clip, target)
+        except InputError:
+            if character is not None:
+                raise
+            return clip, None   # a dance with no humanoid skeleton (no legs, say): drawn as it is
+
     progress = Progress(enabled=not quiet and sys.stderr.isatty())
     try:
-        info = render_video_files(dance_path, song, output, width=width, height=height, fps=fps,
-                                  progress=lambda done, total: progress("render", done, total))
+        info = render_video_files(dance_path, song, output, width=width, height=height, fps=fps, dress=dress,
+                                  figure=figure, progress=lambda done, total: progress("render", done, total))
     finally:
         progress.close()
-    click.echo(f"wrote {output}: {info['frames']} frames at {info['fps']:g} fps, {info['duration_s']:.1f} s, "
+    drawn = f"the {target.name}" if info.get("figure") == "character" and target is not None else "a stick figure"
+    click.echo(f"wrote {output}: {drawn}, {info['frames']} frames at {info['fps']:g} fps, {info['duration_s']:.1f} s, "
                f"rendered in {info['seconds']:.1f} s")
 
 

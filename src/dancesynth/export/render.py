@@ -1,15 +1,16 @@
 """A small software renderer for dance videos: numpy projection, PIL rasterisation.
 
-The scene is a stick figure (bones as thick lines, joints as discs, a disc for the
-head) on a floor grid with a line every 0.5 m, seen by a perspective camera at a
-fixed elevation from a 3/4 front view. The camera keeps its orientation for the
-whole clip and follows the root horizontally through a zero-phase Gaussian low-pass
-(no jitter, no lag); its height stays fixed so the floor does not bob. Everything
-is drawn at twice the output size (up to full HD) and box-filtered down, which
-anti-aliases edges.
+The scene is the dancer on a floor grid with a line every 0.5 m, seen by a perspective
+camera at a fixed elevation from a 3/4 front view. The dancer is a character's skinned
+mesh (``skinned``: z-buffered, smoothly lit triangles) or a stick figure (bones as thick
+lines, joints as discs, a disc for the head); either casts a shadow of thick bones
+straight down onto the floor. The camera keeps its orientation for the whole clip and
+follows the root horizontally through a zero-phase Gaussian low-pass (no jitter, no
+lag); its height stays fixed so the floor does not bob. Everything is drawn at twice
+the output size (up to full HD) and box-filtered down, which anti-aliases edges.
 
 Frames are produced one at a time (``FrameRenderer.frames``), with forward
-kinematics done in chunks, so memory does not grow with the clip's length.
+kinematics (and skinning) done in chunks, so memory does not grow with the clip's length.
 Y is up and lengths are metres, as everywhere in dancesynth.
 """
 
@@ -26,6 +27,7 @@ from ..errors import ModelError
 from ..kinematics import fk
 from ..motion.roles import find_roles
 from ..types import MotionClip
+from .skinned import paint
 
 SUPERSAMPLE = 2              # draw at 2x, box-filter down: cheap anti-aliasing ...
 SUPERSAMPLE_MAX_PIXELS = 1920 * 1080  # ... up to full HD; larger pictures have small enough pixels
@@ -140,15 +142,24 @@ def _rest_height(skeleton, offsets, point_parent) -> float:
     return float(np.ptp(pos[:, 1])) if len(pos) > 1 else 1.0
 
 
-def figure_points(clip: MotionClip, fig: Figure, frames: np.ndarray) -> np.ndarray:
-    """World positions (len(frames), P, 3) of joints and End Sites of the given frames."""
+def clip_pose(clip: MotionClip, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Global joint rotations (len(frames), J, 4) and positions (len(frames), J, 3) of the given frames."""
     sk = clip.skeleton
     local_pos = None if clip.local_pos is None else clip.local_pos[frames]
-    g_rot, g_pos = fk(clip.local_rot[frames], clip.root_pos[frames], sk.offsets, sk.parents, local_pos)
+    return fk(clip.local_rot[frames], clip.root_pos[frames], sk.offsets, sk.parents, local_pos)
+
+
+def pose_points(g_rot: np.ndarray, g_pos: np.ndarray, fig: Figure) -> np.ndarray:
+    """World positions (..., P, 3) of joints and End Sites, from global joint rotations and positions."""
     if len(fig.end_joints) == 0:
         return g_pos
-    ends = g_pos[:, fig.end_joints] + rot.apply(g_rot[:, fig.end_joints], fig.end_offsets)
-    return np.concatenate([g_pos, ends], axis=1)
+    ends = g_pos[..., fig.end_joints, :] + rot.apply(g_rot[..., fig.end_joints, :], fig.end_offsets)
+    return np.concatenate([g_pos, ends], axis=-2)
+
+
+def figure_points(clip: MotionClip, fig: Figure, frames: np.ndarray) -> np.ndarray:
+    """World positions (len(frames), P, 3) of joints and End Sites of the given frames."""
+    return pose_points(*clip_pose(clip, frames), fig)
 
 
 @dataclass(frozen=True)
@@ -185,14 +196,20 @@ class Shot:
     body_height: float
 
 
-def plan_shot(clip: MotionClip, fig: Figure, aspect: float) -> Shot:
-    """Floor height, body size, mean facing and the smoothed path the camera follows."""
+def plan_shot(clip: MotionClip, fig: Figure, aspect: float, body=None) -> Shot:
+    """Floor height, body size, mean facing and the smoothed path the camera follows.
+
+    ``body(g_rot, g_pos)``: the points (F, P, 3) whose extent is the body (default: the
+    figure's joints and End Sites), e.g. a skinned mesh's vertices, whose soles stand below the ankles.
+    """
     n = clip.n_frames
     sample = np.unique(np.linspace(0, n - 1, min(n, 240)).astype(np.int64))
-    pts = figure_points(clip, fig, sample)
-    lowest = pts[..., 1].min(axis=1)
+    g_rot, g_pos = clip_pose(clip, sample)
+    pts = pose_points(g_rot, g_pos, fig)
+    extent = pts if body is None else body(g_rot, g_pos)
+    lowest = extent[..., 1].min(axis=1)
     floor_y = float(np.percentile(lowest, 5))
-    height = float(np.median(pts[..., 1].max(axis=1) - lowest))
+    height = float(np.median(extent[..., 1].max(axis=1) - lowest))
     height = height if np.isfinite(height) and height > 1e-3 else 1.7
     forward = _mean_facing(clip, sample, pts)
     left = np.cross([0.0, 1.0, 0.0], forward)
@@ -225,13 +242,21 @@ def _mean_facing(clip, sample, pts) -> np.ndarray:
 
 
 class FrameRenderer:
-    """Draws the frames of one clip at a given size; ``frames`` yields RGB bytes one frame at a time."""
+    """Draws the frames of one clip at a given size; ``frames`` yields RGB bytes one frame at a time.
 
-    def __init__(self, clip: MotionClip, width: int, height: int):
-        self.clip, self.width, self.height = clip, int(width), int(height)
-        self.shot = plan_shot(clip, build_figure(clip.skeleton), width / height)
+    ``mesh`` (a ``skinned.SkinnedMesh`` bound to the clip's skeleton) draws the dancer as that
+    character; without it the dancer is a stick figure.
+    """
+
+    def __init__(self, clip: MotionClip, width: int, height: int, mesh=None):
+        self.clip, self.width, self.height, self.mesh = clip, int(width), int(height), mesh
+        self.shot = plan_shot(clip, build_figure(clip.skeleton), width / height,
+                              None if mesh is None else mesh.plan_points)
         # Some rigs do not stand up in their rest pose: size the bones by the dancing body.
         self.fig = build_figure(clip.skeleton, self.shot.body_height)
+        self.shadow_bones, self.shadow_radius = self.fig.bones, self.fig.bone_radius
+        if mesh is not None:
+            self.shadow_bones, self.shadow_radius = _mesh_shadow(mesh, self.fig, clip.skeleton)
         s = self.supersample = SUPERSAMPLE if self.width * self.height <= SUPERSAMPLE_MAX_PIXELS else 1
         self.size = (self.width * s, self.height * s)
         self.focal = (self.height * s / 2) / np.tan(np.radians(FOV_Y_DEG) / 2)
@@ -240,6 +265,7 @@ class FrameRenderer:
         right /= np.linalg.norm(right)
         self.basis = (right, np.cross(back, right), back)
         self.background = self._background()
+        self.canvas = self.background.copy()  # drawn on afresh each frame: no new 6 MB image per frame
 
     def camera(self, frame: int) -> Camera:
         tx, tz = self.shot.target_xz[frame]
@@ -264,19 +290,28 @@ class FrameRenderer:
         source_frames = np.asarray(source_frames, dtype=np.int64)
         for start in range(0, len(source_frames), CHUNK_FRAMES):
             idx = source_frames[start:start + CHUNK_FRAMES]
-            pts = figure_points(self.clip, self.fig, idx)
+            g_rot, g_pos = clip_pose(self.clip, idx)
+            pts = pose_points(g_rot, g_pos, self.fig)
+            posed = [None] * len(idx)
+            if self.mesh is not None:
+                posed = self.mesh.pose(g_rot, g_pos, [self.camera(int(f)) for f in idx], NEAR_M)
             for k, f in enumerate(idx):
-                yield self.draw(int(f), pts[k]).tobytes()
+                yield self.draw(int(f), pts[k], posed[k]).tobytes()
 
-    def draw(self, frame: int, points: np.ndarray) -> Image.Image:
-        """One frame as an image of the output size; ``points`` (P, 3) from ``figure_points``."""
+    def draw(self, frame: int, points: np.ndarray, posed=None) -> Image.Image:
+        """One frame as an image of the output size; ``points`` (P, 3) from ``figure_points``;
+        ``posed``: the mesh's frame from ``SkinnedMesh.pose`` (``None``: draw the stick figure)."""
         cam = self.camera(frame)
-        img = self.background.copy()
+        img = self.canvas
+        img.paste(self.background)
         d = ImageDraw.Draw(img)
         self._draw_grid(d, cam)
         self._draw_shadow(d, cam, points)
-        self._draw_figure(d, cam, points)
-        return img.reduce(self.supersample) if self.supersample > 1 else img
+        if posed is None:
+            self._draw_figure(d, cam, points)
+        else:
+            paint(img, self.mesh, posed)
+        return img.reduce(self.supersample) if self.supersample > 1 else img.copy()
 
     def _draw_grid(self, d, cam: Camera) -> None:
         step, radius = GRID_STEP_M, GRID_RADIUS_M
@@ -308,10 +343,11 @@ class FrameRenderer:
         alpha, major = alpha[keep][ok], major[keep][ok]
         floor = np.array(FLOOR, dtype=np.float64)
         lines = np.where(major[:, None], np.array(GRID_MAJOR, float), np.array(GRID_MINOR, float))
-        cols = np.rint(floor + alpha[:, None] * (lines - floor)).astype(int)
-        width = self.supersample
-        for (u0, v0), (u1, v1), c in zip(uv0.tolist(), uv1.tolist(), cols.tolist()):
-            d.line((u0, v0, u1, v1), fill=tuple(c), width=width)
+        cols = np.rint(floor + alpha[:, None] * (lines - floor)).astype(np.int64)
+        inks = cols[:, 0] | cols[:, 1] << 8 | cols[:, 2] << 16  # packed RGB: PIL takes it as is, no tuples
+        width, line = self.supersample, d.line
+        for xy, ink in zip(np.concatenate([uv0, uv1], axis=1).tolist(), inks.tolist()):
+            line(xy, fill=ink, width=width)
 
     def _draw_shadow(self, d, cam: Camera, points: np.ndarray) -> None:
         flat = points.copy()
@@ -321,7 +357,7 @@ class FrameRenderer:
             return
         uv = cam.to_pixels(c).tolist()
         px = self.focal / c[:, 2]
-        for (a, b), r in zip(self.fig.bones.tolist(), self.fig.bone_radius.tolist()):
+        for (a, b), r in zip(self.shadow_bones.tolist(), self.shadow_radius.tolist()):
             w = max(1.0, 2 * r * px[b])
             d.line((*uv[a], *uv[b]), fill=SHADOW, width=int(round(w)))
             _disc(d, uv[b], w / 2, SHADOW)
@@ -366,6 +402,16 @@ class FrameRenderer:
                 f = 0.35 * np.clip((head_c[2] - root_depth) / (0.5 * self.shot.body_height), 0.0, 1.0)
                 col = _rgb(np.array(HEAD, float) * (1 - f) + bg * f)
                 _disc(d, (u, v), fig.head_radius * self.focal / head_c[2], col)
+
+
+def _mesh_shadow(mesh, fig: Figure, skeleton) -> tuple[np.ndarray, np.ndarray]:
+    """Shadow bones (every joint to each child point, the head's too) as thick as the mesh around them."""
+    point_parent = np.concatenate([skeleton.parents, fig.end_joints])
+    bones = np.stack([point_parent[1:], np.arange(1, len(point_parent))], axis=1)
+    rest = pose_points(mesh.bind_rot, mesh.bind_pos, fig)
+    radius = mesh.shadow_radii(rest, bones)
+    keep = radius > 0
+    return bones[keep], radius[keep]
 
 
 def _rgb(c) -> tuple[int, int, int]:

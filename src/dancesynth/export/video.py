@@ -1,5 +1,7 @@
 """MP4 export: render a dance with the software renderer and mux it with its song.
 
+The dancer is drawn as a character's skinned mesh (``figure="character"``, the default,
+when a character with a mesh is given) or as a stick figure (``figure="stick"``).
 Frames are drawn one at a time (``render.FrameRenderer``) and piped as raw RGB into
 an ``ffmpeg`` process that encodes H.264 (``libx264``, ``yuv420p``) and AAC audio;
 no frame is kept after it is written, so memory stays flat however long the dance.
@@ -26,7 +28,7 @@ import numpy as np
 
 from ..errors import DanceSynthError, InputError
 from ..io.files import atomic_path
-from ..types import MotionClip
+from ..types import MotionClip, Skeleton
 
 MAX_LONG_SIDE = 3840          # 4K UHD: 3840x2160, either orientation
 MAX_SHORT_SIDE = 2160
@@ -40,27 +42,42 @@ AAC_BITRATE = "160k"
 _AAC_RATES = {7350, 8000, 11025, 12000, 16000, 22050, 24000, 32000, 44100, 48000, 64000, 88200, 96000}
 _FINISH_TIMEOUT_S = 600.0     # ffmpeg flushing the encoder and moving the index to the front
 _PIPE_BYTES = 1 << 20         # Linux's default ceiling for an unprivileged pipe
+FIGURES = ("character", "stick")
 
 
 def render_video(dance: MotionClip, song_path: Path | None, out_path: Path, *, width: int = 960,
-                 height: int = 540, fps: float | None = None, progress=None) -> dict:
+                 height: int = 540, fps: float | None = None, character=None, figure: str = "character",
+                 progress=None) -> dict:
     """Render ``dance`` to an MP4 at ``out_path`` with ``song_path`` as its sound track.
 
     ``song_path`` ``None`` makes a silent video. ``fps`` resamples the dance by
-    nearest frame (default: the dance's own frame rate). ``progress(done, total)``
-    is called as frames are encoded. Returns ``{"frames", "duration_s", "seconds"
-    (wall time), "fps", "width", "height", "audio", "path"}``.
+    nearest frame (default: the dance's own frame rate). ``character`` (a
+    ``retarget.character.Character`` whose skeleton the dance is on) is drawn as its
+    skinned mesh with ``figure="character"``; ``figure="stick"``, or a character
+    without a mesh, or none, draws a stick figure. ``progress(done, total)`` is called
+    as frames are encoded. Returns ``{"frames", "duration_s", "seconds" (wall time),
+    "fps", "width", "height", "audio", "figure" (what was drawn), "path"}``.
 
     Raises ``InputError`` for an output not ending in ``.mp4`` or in a missing folder,
     a size that is not even, positive and at most 3840x2160, an empty or non-finite
-    dance, a song that cannot be decoded or whose duration differs from the dance's
-    by more than 10 % + 1 s, or a missing ``ffmpeg``; ``DanceSynthError`` when ffmpeg
-    fails. No partial output is left behind.
+    dance, an unknown ``figure``, a character on another skeleton than the dance's or
+    with a broken mesh, a song that cannot be decoded or whose duration differs from
+    the dance's by more than 10 % + 1 s, or a missing ``ffmpeg``; ``DanceSynthError``
+    when ffmpeg fails. No partial output is left behind.
     """
     t0 = time.perf_counter()
     out_path = check_output_path(out_path)
     width, height = _check_size(width, height)
     _check_dance(dance)
+    if figure not in FIGURES:
+        raise InputError(f"unknown figure {figure!r}: use one of {', '.join(FIGURES)}")
+    mesh = None
+    if character is not None:
+        dance = on_skeleton_of(dance, character)
+        if figure == "character" and character.mesh is not None:
+            from .skinned import SkinnedMesh
+
+            mesh = SkinnedMesh.from_character(character)
     fps_out = _check_fps(dance.fps if fps is None else fps)
     ffmpeg = _find_tool("ffmpeg")
     song = None
@@ -71,16 +88,19 @@ def render_video(dance: MotionClip, song_path: Path | None, out_path: Path, *, w
     n = len(source)
     from .render import FrameRenderer  # PIL and the scene only when a video is made
 
-    renderer = FrameRenderer(dance, width, height)
+    renderer = FrameRenderer(dance, width, height, mesh=mesh)
     with atomic_path(out_path) as tmp:
         cmd = ffmpeg_command(ffmpeg, tmp, width=width, height=height, fps=fps_out, n_frames=n, song=song)
         _encode(cmd, renderer.frames(source), n, progress, out_path)
     return {"frames": n, "duration_s": n / fps_out, "seconds": time.perf_counter() - t0, "fps": fps_out,
-            "width": width, "height": height, "audio": song is not None, "path": str(out_path)}
+            "width": width, "height": height, "audio": song is not None,
+            "figure": "stick" if mesh is None else "character", "path": str(out_path)}
 
 
-def render_video_files(dance_path: Path, song_path: Path | None, out_path: Path, **kwargs) -> dict:
-    """Read the BVH at ``dance_path`` and ``render_video`` it with the song at ``song_path``."""
+def render_video_files(dance_path: Path, song_path: Path | None, out_path: Path, *, dress=None, **kwargs) -> dict:
+    """Read the BVH at ``dance_path`` and ``render_video`` it with the song at ``song_path``
+    (``kwargs``: ``render_video``'s, e.g. ``figure=``). ``dress(clip) -> (clip, character)``, when
+    given, puts the dance on the character to draw (``retarget.on_character``)."""
     from ..io.bvh import read_bvh
 
     out_path = check_output_path(out_path)
@@ -89,6 +109,8 @@ def render_video_files(dance_path: Path, song_path: Path | None, out_path: Path,
         raise InputError(f"output {out_path} is the dance file itself; choose another output name")
     # Every frame as written: dropping a T-pose frame here would shift the dance off the music.
     dance = read_bvh(dance_path, drop_tpose=False)
+    if dress is not None:
+        dance, kwargs["character"] = dress(dance)
     return render_video(dance, song_path, out_path, **kwargs)
 
 
@@ -139,6 +161,39 @@ def _check_dance(dance: MotionClip) -> None:
     arrays = [dance.root_pos, dance.local_rot] + ([] if dance.local_pos is None else [dance.local_pos])
     if not all(np.isfinite(a).all() for a in arrays):
         raise InputError("the dance contains NaN or infinite values; re-create or re-export it")
+
+
+def on_skeleton_of(dance: MotionClip, character) -> MotionClip:
+    """``dance`` with its joints in the order of ``character.skeleton`` (a BVH file lists them depth first,
+    which may not be the character's order); ``InputError`` if the two skeletons are not the same tree."""
+    from ..retarget.character import Character
+
+    if not isinstance(character, Character):
+        raise InputError(f"expected a Character to draw the dance as, got {type(character).__name__}")
+    have, want = dance.skeleton, character.skeleton
+    if have.names == want.names and np.array_equal(have.parents, want.parents):
+        return dance
+    where = {n: j for j, n in enumerate(have.names)}
+
+    def parent(sk, j):
+        return sk.names[sk.parents[j]] if sk.parents[j] >= 0 else None
+
+    why = next((f"the dance has no joint {n!r}" if n not in where else
+                f"joint {n!r} hangs from {parent(have, where[n])!r} in the dance, from {parent(want, j)!r} in the "
+                "character" for j, n in enumerate(want.names)
+                if n not in where or parent(have, where[n]) != parent(want, j)), None)
+    if why is None and have.n_joints != want.n_joints:
+        why = f"the character has no joint {next(n for n in have.names if n not in want.names)!r}"
+    if why is not None:
+        raise InputError(f"the dance's skeleton is not character {character.name!r}'s ({why}): retarget the dance "
+                         "onto the character first")
+    order = np.array([where[n] for n in want.names])
+    new_index = {int(old): new for new, old in enumerate(order)}
+    sk = Skeleton(want.names, want.parents, have.offsets[order], tuple(have.channels[j] for j in order),
+                  {new_index[j]: off for j, off in have.end_sites.items()})
+    local_pos = None if dance.local_pos is None else dance.local_pos[:, order]
+    return MotionClip(sk, dance.fps, dance.root_pos, dance.local_rot[:, order], local_pos, dance.contacts,
+                      dict(dance.meta), dance.provenance)
 
 
 def check_durations(dance_s: float, song_s: float, song_name) -> None:
