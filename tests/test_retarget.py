@@ -134,16 +134,26 @@ def test_a_rig_without_the_required_bones_is_refused_with_the_toml_that_fixes_it
     assert set(read_bvh(tmp_path / "odd_dance.bvh").skeleton.names) == set(names)
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--character", "robot"], "unknown character 'robot'"),
-    (["--character", "missing.glb"], "does not exist"),
-    (["--character", "rig.obj"], "cannot read .obj"),
+@pytest.mark.parametrize("character, message", [
+    ("robot", "unknown character 'robot'"),
+    ("missing.glb", "does not exist"),
+    ("rig.obj", "cannot read .obj"),
+    ("skeleton_only.glb", "no skin"),
+    ("corrupt.vrm", "corrupt.vrm"),
+    ("empty.bvh", "empty.bvh"),
 ])
-def test_bad_characters_get_one_line_errors_and_no_file(tmp_path, bundled_song, args, message):
-    out = tmp_path / "out.bvh"
+def test_bad_characters_get_one_line_errors_and_no_file(tmp_path, character, message):
+    from dancesynth.export.gltf import glb_bytes
+
+    sk, _ = rig_skeleton("mannequin")
     (tmp_path / "rig.obj").write_text("o cube\n")
-    r = cli("dance", TRUMPET, "-o", out, *[a if a != "rig.obj" else tmp_path / a for a in args])
-    assert_clean_failure(r, out, message)
+    (tmp_path / "skeleton_only.glb").write_bytes(glb_bytes(MotionClip(sk, 30.0, sk.offsets[:1],
+                                                                      np.tile(rot.IDENTITY, (1, sk.n_joints, 1)))))
+    (tmp_path / "corrupt.vrm").write_bytes(b"glTF" + bytes(range(60)))
+    (tmp_path / "empty.bvh").write_text("")
+    out = tmp_path / "out.glb"
+    spec = character if character == "robot" else tmp_path / character
+    assert_clean_failure(cli("dance", TRUMPET, "-o", out, "--character", spec), out, message)
 
 
 def test_an_output_extension_we_do_not_write_is_refused_before_dancing(tmp_path, bundled_song):
