@@ -76,7 +76,7 @@ def stick_mesh(skeleton) -> Mesh:
 
 
 def write_model(path, skeleton, mesh, *, turn=False, armature=None, twist=False, names=None, extensions=None,
-                buffers="glb") -> list[int]:
+                buffers="glb", mesh_in_armature=False) -> list[int]:
     """Write ``skeleton`` (standing in its T-pose) with ``mesh`` skinned to it as another tool would, and
     return each joint's node index.
 
@@ -84,7 +84,9 @@ def write_model(path, skeleton, mesh, *, turn=False, armature=None, twist=False,
     joints' translations are then in its units, as FBX conversions have them); ``twist``: give every joint
     a rest rotation of its own (the world rest pose stays the T-pose); ``names``: node names (None: none);
     ``extensions``: a function of the joint -> node list returning the glTF extensions (VRM tables);
-    ``buffers``: "glb", "external" (.gltf + .bin) or "datauri" (.gltf, base64 buffer)."""
+    ``buffers``: "glb", "external" (.gltf + .bin) or "datauri" (.gltf, base64 buffer); ``mesh_in_armature``:
+    the mesh node hangs from the armature with its vertices in the armature's frame and units, and the
+    inverse bind matrices take them there (as Blender writes an FBX conversion)."""
     import pygltflib as g
 
     turned = TURN if turn else Rotation.identity()
@@ -98,7 +100,11 @@ def write_model(path, skeleton, mesh, *, turn=False, armature=None, twist=False,
     nodes = [g.Node(name="Body", mesh=0, skin=0)]
     if armature:
         nodes.append(g.Node(name="Armature", rotation=arm_rot.as_quat().tolist(),
-                            scale=(scale if len(scale) == 3 else np.repeat(scale, 3)).tolist(), children=[2]))
+                            scale=(scale if len(scale) == 3 else np.repeat(scale, 3)).tolist(),
+                            children=[2, 0] if mesh_in_armature else [2]))
+    mesh_rot, mesh_scale = (arm_rot, scale[0]) if mesh_in_armature else (Rotation.identity(), 1.0)
+    to_mesh = np.eye(4)   # the mesh's frame in the world
+    to_mesh[:3, :3] = mesh_rot.as_matrix() * mesh_scale
     for j in range(n):
         p = skeleton.parents[j]
         parent_rot, parent_pos = (arm_rot, np.zeros(3)) if p < 0 else (world[p], x[p])
@@ -110,7 +116,7 @@ def write_model(path, skeleton, mesh, *, turn=False, armature=None, twist=False,
     for j in range(n):
         m = np.eye(4)
         m[:3, :3], m[:3, 3] = world[j].as_matrix() * scale[0], x[j]
-        ibm[j] = np.linalg.inv(m).T   # column-major
+        ibm[j] = (np.linalg.inv(m) @ to_mesh).T   # column-major
 
     blob, views, accessors = bytearray(), [], []
 
@@ -124,9 +130,10 @@ def write_model(path, skeleton, mesh, *, turn=False, armature=None, twist=False,
                                     **extra))
         return len(accessors) - 1
 
-    pos = turned.apply(mesh.positions).astype(np.float32)
+    into_mesh = mesh_rot.inv() * turned
+    pos = (into_mesh.apply(mesh.positions) / mesh_scale).astype(np.float32)
     attributes = g.Attributes(POSITION=accessor(pos, g.VEC3, g.FLOAT, g.ARRAY_BUFFER, bounds=True),
-                              NORMAL=accessor(turned.apply(mesh.normals).astype(np.float32), g.VEC3, g.FLOAT,
+                              NORMAL=accessor(into_mesh.apply(mesh.normals).astype(np.float32), g.VEC3, g.FLOAT,
                                               g.ARRAY_BUFFER),
                               COLOR_0=accessor(mesh.colours, g.VEC3, g.FLOAT, g.ARRAY_BUFFER),
                               JOINTS_0=accessor(mesh.joints.astype(np.uint16), g.VEC4, g.UNSIGNED_SHORT,
@@ -137,7 +144,7 @@ def write_model(path, skeleton, mesh, *, turn=False, armature=None, twist=False,
                                                                g.FLOAT))
     extensions = extensions(node_of) if extensions else {}
     gltf = g.GLTF2(asset=g.Asset(version="2.0", generator="dancesynth tests"), scene=0,
-                   scenes=[g.Scene(nodes=[0, 1])], nodes=nodes, skins=[skin],
+                   scenes=[g.Scene(nodes=[1] if mesh_in_armature else [0, 1])], nodes=nodes, skins=[skin],
                    meshes=[g.Mesh(primitives=[g.Primitive(attributes=attributes, indices=tris, material=0)])],
                    materials=[g.Material(pbrMetallicRoughness=g.PbrMetallicRoughness(metallicFactor=0.0))],
                    accessors=accessors, bufferViews=views, buffers=[g.Buffer(byteLength=len(blob))],
@@ -171,6 +178,14 @@ def vrm0_extension(bones: dict[str, int]):
     return make
 
 
+def vrm1_extension(bones: dict[str, int], name: str = "mannequin 1.0"):
+    """A VRM 1.0 extension (meta name and humanoid) for ``bones`` (bone -> joint)."""
+    def make(node_of):
+        return {"VRMC_vrm": {"specVersion": "1.0", "meta": {"name": name},
+                             "humanoid": {"humanBones": {b: {"node": node_of[j]} for b, j in bones.items()}}}}
+    return make
+
+
 def write_vrm0_mannequin(path) -> list[int]:
     """The mannequin (its mesh and rig) as a VRM 0.x avatar: identity rest rotations, turned to face -Z,
     extension "VRM"."""
@@ -180,12 +195,13 @@ def write_vrm0_mannequin(path) -> list[int]:
                        extensions=vrm0_extension(MANNEQUIN_BONES))
 
 
-def fbx_style_model(path, buffers="glb", names=None) -> list[int]:
+def fbx_style_model(path, buffers="glb", names=None, mesh_in_armature=False) -> list[int]:
     """The Mixamo layout as an FBX conversion writes it: a Z-up "Armature" at 0.01 (joints in centimetres),
-    a rest rotation on every joint."""
+    a rest rotation on every joint; ``mesh_in_armature``: see ``write_model``."""
     mixamo, _ = rig_skeleton("mixamo")
     return write_model(path, mixamo, stick_mesh(mixamo), armature=(Rotation.from_euler("x", 90, degrees=True), 0.01),
-                       twist=True, names=mixamo.names if names is None else names, buffers=buffers)
+                       twist=True, names=mixamo.names if names is None else names, buffers=buffers,
+                       mesh_in_armature=mesh_in_armature)
 
 
 def assert_same_rest(character, skeleton, turn=False):
@@ -212,10 +228,7 @@ def test_a_vrm0_avatar_loads_with_its_humanoid_bones_facing_minus_z(tmp_path):
 def test_a_vrm1_avatar_with_rest_rotations_on_its_joints_loads_its_rest_pose(tmp_path):
     path = tmp_path / "avatar.vrm"
     write_model(path, MANNEQUIN, stick_mesh(MANNEQUIN), twist=True, names=MANNEQUIN.names,
-                extensions=lambda node_of: {"VRMC_vrm": {"specVersion": "1.0", "meta": {"name": "twisted"},
-                                                         "humanoid": {"humanBones": {
-                                                             b: {"node": node_of[j]}
-                                                             for b, j in MANNEQUIN_BONES.items()}}}})
+                extensions=vrm1_extension(MANNEQUIN_BONES, "twisted"))
     character = load_gltf_character(path)
     assert character.kind == "vrm1" and character.name == "twisted"
     assert character.bones == MANNEQUIN_BONES
@@ -289,6 +302,11 @@ def _cycle(doc):
     doc["nodes"][5]["children"].append(2)
 
 
+def _mesh_edit(edit):
+    """A ``_json_edit`` of the mesh's first primitive's attributes."""
+    return _json_edit(lambda doc: edit(doc, doc["meshes"][0]["primitives"][0]["attributes"]))
+
+
 BROKEN = {
     "skinless.glb": (_skinless, ["no skin", "rigged"]),
     "truncated.vrm": (_truncated, ["truncated"]),
@@ -300,6 +318,14 @@ BROKEN = {
     "dangling.gltf": (_json_edit(_joint_out_of_range), ["corrupt", "999"]),
     "cycle.gltf": (_json_edit(_cycle), ["corrupt"]),
     "wrongtype.gltf": (_json_edit(lambda d: d["nodes"][3].update(translation="up")), ["not a valid glTF"]),
+    "badindices.gltf": (_json_edit(lambda d: d["meshes"][0]["primitives"][0].update(indices=999)),
+                       ["corrupt", "indices", "accessor 999"]),
+    "shortview.gltf": (_mesh_edit(lambda d, a: d["bufferViews"][d["accessors"][a["NORMAL"]]["bufferView"]].update(
+        byteLength=100)), ["corrupt", "NORMAL", "past the end"]),
+    "floatjoints.gltf": (_mesh_edit(lambda d, a: a.update(JOINTS_0=a["WEIGHTS_0"])),
+                         ["corrupt", "JOINTS_0", "floats"]),
+    "vec2normals.gltf": (_mesh_edit(lambda d, a: d["accessors"][a["NORMAL"]].update(type="VEC2")),
+                         ["corrupt", "NORMAL", "VEC3"]),
 }
 
 
