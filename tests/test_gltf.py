@@ -10,7 +10,6 @@ import functools
 import json
 import shutil
 import subprocess
-import time
 
 import numpy as np
 import pytest
@@ -249,12 +248,9 @@ def test_a_rest_pose_other_than_identity_binds_the_body_where_it_was_modelled(tm
     assert np.abs(skinned_from_file(path, (1,))[1] - character.mesh.positions).max() < 1e-5
 
 
-def test_a_three_minute_dance_with_the_body_exports_well_under_a_second():
-    clip = synthetic_mannequin_dance(5400)
-    mesh = mannequin_character().mesh
-    t0 = time.perf_counter()
-    data = glb_bytes(clip, mesh)
-    assert time.perf_counter() - t0 < 1.0
+def test_a_three_minute_dance_with_the_body_is_a_file_of_a_few_megabytes():
+    # (its export time is measured by benchmarks/retarget_bench.py, not asserted here)
+    data = glb_bytes(synthetic_mannequin_dance(5400), mannequin_character().mesh)
     assert data[:4] == b"glTF" and len(data) < 5_000_000
 
 
