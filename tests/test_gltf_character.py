@@ -24,7 +24,8 @@ from dancesynth.errors import InputError
 from dancesynth.export.onto_model import onto_model_bytes
 from dancesynth.kinematics import fk
 from dancesynth.retarget.character import Mesh
-from dancesynth.retarget.gltf_character import load_gltf_character, open_gltf
+from dancesynth.retarget.gltf_character import load_gltf_character
+from dancesynth.retarget.gltf_file import open_gltf
 from dancesynth.retarget.rigs import rig_skeleton
 from dancesynth.rotations import IDENTITY, about_y, exp, mul
 from dancesynth.types import MotionClip
@@ -34,6 +35,9 @@ MANNEQUIN, MANNEQUIN_BONES = rig_skeleton("mannequin")
 TURN = Rotation.from_euler("y", 180, degrees=True)     # VRM 0.x models face -Z
 needs_node = pytest.mark.skipif(shutil.which("node") is None or not (CLIENTS / "node_modules" / "three").is_dir(),
                                 reason="needs node and the npm clients (bash scripts/setup.sh --test installs them)")
+has_validator = shutil.which("node") is not None and (CLIENTS / "node_modules" / "gltf-validator").is_dir()
+needs_validator = pytest.mark.skipif(not has_validator, reason="needs node and the npm gltf-validator (bash "
+                                     "scripts/setup.sh --test installs them)")
 
 
 def rest_positions(skeleton, rest_rot=None, rest_root=None) -> np.ndarray:
@@ -76,7 +80,7 @@ def stick_mesh(skeleton) -> Mesh:
 
 
 def write_model(path, skeleton, mesh, *, turn=False, armature=None, twist=False, names=None, extensions=None,
-                buffers="glb", mesh_in_armature=False) -> list[int]:
+                buffers="glb", mesh_in_armature=False, skin=True) -> list[int]:
     """Write ``skeleton`` (standing in its T-pose) with ``mesh`` skinned to it as another tool would, and
     return each joint's node index.
 
@@ -86,7 +90,9 @@ def write_model(path, skeleton, mesh, *, turn=False, armature=None, twist=False,
     ``extensions``: a function of the joint -> node list returning the glTF extensions (VRM tables);
     ``buffers``: "glb", "external" (.gltf + .bin) or "datauri" (.gltf, base64 buffer); ``mesh_in_armature``:
     the mesh node hangs from the armature with its vertices in the armature's frame and units, and the
-    inverse bind matrices take them there (as Blender writes an FBX conversion)."""
+    inverse bind matrices take them there (as Blender writes an FBX conversion); ``skin``: False writes no
+    skin but hangs each joint's part of the (rigid) mesh from the joint as a mesh of its own, on a node
+    squashed by a non-uniform scale (as VRM samples made without a skin have them)."""
     import pygltflib as g
 
     turned = TURN if turn else Rotation.identity()
@@ -97,7 +103,7 @@ def write_model(path, skeleton, mesh, *, turn=False, armature=None, twist=False,
     scale = np.atleast_1d(arm_scale).astype(float)
     first = 2 if armature else 1
     node_of = list(range(first, first + n))
-    nodes = [g.Node(name="Body", mesh=0, skin=0)]
+    nodes = [g.Node(name="Body", mesh=0, skin=0) if skin else g.Node(name="Body")]
     if armature:
         nodes.append(g.Node(name="Armature", rotation=arm_rot.as_quat().tolist(),
                             scale=(scale if len(scale) == 3 else np.repeat(scale, 3)).tolist(),
@@ -112,11 +118,8 @@ def write_model(path, skeleton, mesh, *, turn=False, armature=None, twist=False,
         nodes.append(g.Node(name=None if names is None else names[j], translation=t.tolist(),
                             rotation=(parent_rot.inv() * world[j]).as_quat().tolist(),
                             children=[node_of[c] for c in skeleton.children(j)]))
-    ibm = np.zeros((n, 4, 4))
-    for j in range(n):
-        m = np.eye(4)
-        m[:3, :3], m[:3, 3] = world[j].as_matrix() * scale[0], x[j]
-        ibm[j] = (np.linalg.inv(m) @ to_mesh).T   # column-major
+    joint_world = np.tile(np.eye(4), (n, 1, 1))   # each joint's world transform
+    joint_world[:, :3, :3], joint_world[:, :3, 3] = world.as_matrix() * scale[0], x
 
     blob, views, accessors = bytearray(), [], []
 
@@ -130,22 +133,41 @@ def write_model(path, skeleton, mesh, *, turn=False, armature=None, twist=False,
                                     **extra))
         return len(accessors) - 1
 
-    into_mesh = mesh_rot.inv() * turned
-    pos = (into_mesh.apply(mesh.positions) / mesh_scale).astype(np.float32)
-    attributes = g.Attributes(POSITION=accessor(pos, g.VEC3, g.FLOAT, g.ARRAY_BUFFER, bounds=True),
-                              NORMAL=accessor(into_mesh.apply(mesh.normals).astype(np.float32), g.VEC3, g.FLOAT,
-                                              g.ARRAY_BUFFER),
-                              COLOR_0=accessor(mesh.colours, g.VEC3, g.FLOAT, g.ARRAY_BUFFER),
-                              JOINTS_0=accessor(mesh.joints.astype(np.uint16), g.VEC4, g.UNSIGNED_SHORT,
-                                                g.ARRAY_BUFFER),
-                              WEIGHTS_0=accessor(mesh.weights, g.VEC4, g.FLOAT, g.ARRAY_BUFFER))
-    tris = accessor(mesh.indices.reshape(-1).astype(np.uint32), g.SCALAR, g.UNSIGNED_INT, g.ELEMENT_ARRAY_BUFFER)
-    skin = g.Skin(joints=node_of, inverseBindMatrices=accessor(ibm.reshape(n, 16).astype(np.float32), g.MAT4,
-                                                               g.FLOAT))
+    def primitive(keep, frame):
+        """A primitive of ``mesh``'s vertices where ``keep`` (and the triangles among them) on a node whose
+        world transform is ``frame``."""
+        at = np.flatnonzero(keep)
+        tris = (np.cumsum(keep) - 1)[mesh.indices[keep[mesh.indices].all(axis=1)]]
+        pos = np.linalg.solve(frame[:3, :3], (turned.apply(mesh.positions[at]) - frame[:3, 3]).T).T
+        nrm = turned.apply(mesh.normals[at]) @ frame[:3, :3]     # the inverse transpose's inverse
+        nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+        attributes = g.Attributes(POSITION=accessor(pos.astype(np.float32), g.VEC3, g.FLOAT, g.ARRAY_BUFFER,
+                                                    bounds=True),
+                                  NORMAL=accessor(nrm.astype(np.float32), g.VEC3, g.FLOAT, g.ARRAY_BUFFER),
+                                  COLOR_0=accessor(mesh.colours[at], g.VEC3, g.FLOAT, g.ARRAY_BUFFER))
+        if skin:
+            attributes.JOINTS_0 = accessor(mesh.joints[at].astype(np.uint16), g.VEC4, g.UNSIGNED_SHORT,
+                                           g.ARRAY_BUFFER)
+            attributes.WEIGHTS_0 = accessor(mesh.weights[at], g.VEC4, g.FLOAT, g.ARRAY_BUFFER)
+        tris = accessor(tris.reshape(-1).astype(np.uint32), g.SCALAR, g.UNSIGNED_INT, g.ELEMENT_ARRAY_BUFFER)
+        return g.Mesh(primitives=[g.Primitive(attributes=attributes, indices=tris, material=0)])
+
+    if skin:
+        meshes = [primitive(np.ones(len(mesh.positions), bool), to_mesh)]
+        ibm = (np.linalg.inv(joint_world) @ to_mesh).transpose(0, 2, 1)   # column-major
+        skins = [g.Skin(joints=node_of, inverseBindMatrices=accessor(ibm.reshape(n, 16).astype(np.float32),
+                                                                     g.MAT4, g.FLOAT))]
+    else:
+        assert (mesh.weights[:, 0] == 1).all(), "a mesh hung from bones is rigid"
+        meshes, skins, squash = [], [], np.array([1.0, 2.0, 0.5])
+        for j in np.unique(mesh.joints[:, 0]):
+            meshes.append(primitive(mesh.joints[:, 0] == j, joint_world[j] @ np.diag([*squash, 1.0])))
+            nodes[node_of[j]].children.append(len(nodes))
+            nodes.append(g.Node(name=f"{nodes[node_of[j]].name or 'joint'} mesh", mesh=len(meshes) - 1,
+                                scale=squash.tolist()))
     extensions = extensions(node_of) if extensions else {}
     gltf = g.GLTF2(asset=g.Asset(version="2.0", generator="dancesynth tests"), scene=0,
-                   scenes=[g.Scene(nodes=[1] if mesh_in_armature else [0, 1])], nodes=nodes, skins=[skin],
-                   meshes=[g.Mesh(primitives=[g.Primitive(attributes=attributes, indices=tris, material=0)])],
+                   scenes=[g.Scene(nodes=[1] if mesh_in_armature else [0, 1])], nodes=nodes, skins=skins, meshes=meshes,
                    materials=[g.Material(pbrMetallicRoughness=g.PbrMetallicRoughness(metallicFactor=0.0))],
                    accessors=accessors, bufferViews=views, buffers=[g.Buffer(byteLength=len(blob))],
                    extensions=extensions, extensionsUsed=list(extensions))
@@ -195,6 +217,16 @@ def write_vrm0_mannequin(path) -> list[int]:
                        extensions=vrm0_extension(MANNEQUIN_BONES))
 
 
+def write_skinless_vrm(path, version="1.0") -> list[int]:
+    """The mannequin as a VRM avatar (``version`` "1.0" or "0.x", facing -Z; None: a plain glTF) made
+    without a skin: a box round each bone, hung from the bone's node as a mesh of its own (on a squashed
+    child node), rest rotations on every joint."""
+    extensions = {"1.0": vrm1_extension(MANNEQUIN_BONES, "skinless"), "0.x": vrm0_extension(MANNEQUIN_BONES),
+                  None: None}[version]
+    return write_model(path, MANNEQUIN, stick_mesh(MANNEQUIN), turn=version == "0.x", twist=True,
+                       names=MANNEQUIN.names, extensions=extensions, skin=False)
+
+
 def fbx_style_model(path, buffers="glb", names=None, mesh_in_armature=False) -> list[int]:
     """The Mixamo layout as an FBX conversion writes it: a Z-up "Armature" at 0.01 (joints in centimetres),
     a rest rotation on every joint; ``mesh_in_armature``: see ``write_model``."""
@@ -234,6 +266,17 @@ def test_a_vrm1_avatar_with_rest_rotations_on_its_joints_loads_its_rest_pose(tmp
     assert character.bones == MANNEQUIN_BONES
     assert_same_rest(character, MANNEQUIN)
     assert not np.allclose(character.rest_rot, IDENTITY)
+
+
+@pytest.mark.parametrize("version, kind", [("1.0", "vrm1"), ("0.x", "vrm0")])
+def test_a_vrm_avatar_without_a_skin_has_its_humanoid_bones_as_its_skeleton(tmp_path, version, kind):
+    path = tmp_path / "skinless.vrm"
+    node_of = write_skinless_vrm(path, version)
+    character = load_gltf_character(path)
+    assert character.kind == kind
+    assert character.bones == MANNEQUIN_BONES and character.nodes == tuple(node_of)
+    assert_same_rest(character, MANNEQUIN, turn=version == "0.x")
+    assert character.mesh is not None     # its boxes, each on its bone (test_user_mesh checks where)
 
 
 def test_an_fbx_style_model_in_centimetres_under_a_turned_armature_comes_out_in_metres(tmp_path):
@@ -309,6 +352,7 @@ def _mesh_edit(edit):
 
 BROKEN = {
     "skinless.glb": (_skinless, ["no skin", "rigged"]),
+    "meshes-on-nodes.glb": (lambda p: write_skinless_vrm(p, version=None), ["no skin", "rigged"]),
     "truncated.vrm": (_truncated, ["truncated"]),
     "random.glb": (lambda p: p.write_bytes(np.random.default_rng(1).bytes(5000)), ["not a glTF"]),
     "hello.gltf": (lambda p: p.write_text('{"hello": [1, 2]}'), ["not a glTF 2.0"]),
@@ -403,14 +447,16 @@ def node_world_poses(path, animation="dance") -> dict[str, tuple[Rotation, np.nd
     return out
 
 
-@pytest.fixture(params=["fbx.gltf", "avatar.vrm"])
+USERS_MODELS = {"fbx.gltf": lambda path: fbx_style_model(path, buffers="external"),
+                "avatar.vrm": write_vrm0_mannequin, "skinless.vrm": write_skinless_vrm}
+
+
+@pytest.fixture(params=USERS_MODELS)
 def users_model(request, tmp_path):
-    """A user's model (an FBX-style glTF with an external buffer, a VRM 0.x avatar), its character and a dance."""
+    """A user's model (an FBX-style glTF with an external buffer, a VRM 0.x avatar, a VRM 1.0 one without a
+    skin), its character and a dance."""
     path = tmp_path / request.param
-    if request.param == "avatar.vrm":
-        write_vrm0_mannequin(path)
-    else:
-        fbx_style_model(path, buffers="external")
+    USERS_MODELS[request.param](path)
     character = load_gltf_character(path)
     clip = wiggle(character.skeleton, character.rest_rot, character.rest_root)
     out = tmp_path / "danced.glb"
@@ -422,23 +468,43 @@ def test_the_dance_added_to_a_users_model_puts_every_joint_where_we_do(users_mod
     import pygltflib
 
     path, character, clip, out = users_model
+    assert_joints_where_we_have_them(out, character, clip)
+    source, before, after = open_gltf(path), load_gltf_character(path), pygltflib.GLTF2.load(str(out))
+    assert [a.name for a in after.animations] == ["dance"] and len(after.buffers) == 1
+    assert after.buffers[0].uri is None
+    assert len(after.meshes) == len(source.meshes) and len(after.skins) == len(source.skins or [])
+    assert after.extensions == source.extensions     # the VRM table is kept
+    assert load_gltf_character(out).skeleton.names == before.skeleton.names
+
+
+def assert_joints_where_we_have_them(out, character, clip):
+    """Every joint of the dance in ``out`` is where our forward kinematics of ``clip`` puts it."""
     _, ours = fk(clip.local_rot, clip.root_pos, character.skeleton.offsets, character.skeleton.parents)
     got = node_world_poses(out)
     theirs = np.stack([got[character.skeleton.names[j]][1] for j in range(character.skeleton.n_joints)], axis=1)
     assert theirs.shape == ours.shape
     assert np.abs(theirs - ours).max() < 1e-4      # metres, every joint, every frame
-    before, after = load_gltf_character(path), pygltflib.GLTF2.load(str(out))
-    assert [a.name for a in after.animations] == ["dance"] and len(after.buffers) == 1
-    assert after.buffers[0].uri is None and len(after.meshes) == 1 and len(after.skins) == 1
-    assert after.extensions == open_gltf(path).extensions     # the VRM table is kept
-    assert load_gltf_character(out).skeleton.names == before.skeleton.names
 
 
-@pytest.mark.skipif(shutil.which("node") is None or not (CLIENTS / "node_modules" / "gltf-validator").is_dir(),
-                    reason="needs node and the npm gltf-validator (bash scripts/setup.sh --test installs them)")
+@needs_validator
 def test_the_khronos_validator_finds_no_error_in_a_model_with_our_dance(users_model):
     report = validate(users_model[3])
     assert report["numErrors"] == 0, report["messages"][:5]
+
+
+def test_a_dance_retargeted_onto_a_vrm_without_a_skin_plays_on_the_avatar_itself(tmp_path):
+    from dancesynth.retarget import on_character
+
+    path, out = tmp_path / "skinless.vrm", tmp_path / "danced.glb"
+    write_skinless_vrm(path)
+    source = wiggle(MANNEQUIN, np.tile(IDENTITY, (MANNEQUIN.n_joints, 1)), MANNEQUIN.offsets[0])
+    clip, character = on_character(source, str(path))
+    assert character.kind == "vrm1" and character.bones == MANNEQUIN_BONES
+    out.write_bytes(onto_model_bytes(character, clip))
+    assert_joints_where_we_have_them(out, character, clip)
+    if has_validator:
+        report = validate(out)
+        assert report["numErrors"] == 0, report["messages"][:5]
 
 
 def test_a_gltf_with_its_buffer_and_texture_in_files_becomes_one_self_contained_glb(tmp_path):
@@ -461,7 +527,7 @@ def test_a_gltf_with_its_buffer_and_texture_in_files_becomes_one_self_contained_
     view = gltf.bufferViews[image.bufferView]
     Image.open(io.BytesIO(gltf.binary_blob()[view.byteOffset:view.byteOffset + view.byteLength])).verify()
     assert_same_rest(load_gltf_character(out), rig_skeleton("mixamo")[0])
-    if shutil.which("node") and (CLIENTS / "node_modules" / "gltf-validator").is_dir():
+    if has_validator:
         assert validate(out)["numErrors"] == 0
 
 

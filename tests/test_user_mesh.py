@@ -20,7 +20,7 @@ from PIL import Image
 from scipy.spatial.transform import Rotation
 
 from test_gltf_character import (MANNEQUIN, MANNEQUIN_BONES, TURN, fbx_style_model, stick_mesh, vrm1_extension,
-                                 write_model, write_vrm0_mannequin)
+                                 write_model, write_skinless_vrm, write_vrm0_mannequin)
 from test_render_character import frame, needs_ffmpeg, shaded, waving_dance
 from dancesynth.export import render_video
 from dancesynth.export.vrm import vrm_bytes
@@ -276,6 +276,19 @@ def test_an_unskinned_mesh_hanging_from_a_bone_moves_with_it_and_one_outside_the
     hat = g_pos[j] + Rotation.from_quat(g_rot[j]).apply(0.01 * (STICKS.positions + [0, 10, 0]))
     assert np.abs(mesh.positions[n:] - hat).max() < 1e-5
     assert (mesh.joints[n:, 0] == j).all() and (mesh.weights[n:, 0] == 1).all()
+
+
+def test_a_vrm_without_a_skin_has_each_bones_mesh_rigidly_on_that_bone(tmp_path):
+    path = tmp_path / "skinless.vrm"
+    write_skinless_vrm(path)     # each bone's box a mesh of its own, squashed by its node's scale
+    character = load_gltf_character(path)
+    mesh, sticks = character.mesh, stick_mesh(MANNEQUIN)
+    assert character.skeleton.names == MANNEQUIN.names
+    by_bone = np.argsort(sticks.joints[:, 0], kind="stable")    # the file holds them bone by bone
+    assert np.abs(mesh.positions - sticks.positions[by_bone]).max() < 1e-5
+    assert np.abs(mesh.normals - sticks.normals[by_bone]).max() < 1e-5
+    np.testing.assert_array_equal(mesh.joints[:, 0], sticks.joints[by_bone, 0])
+    assert (mesh.weights[:, 0] == 1).all() and len(mesh.indices) == len(sticks.indices)
 
 
 def test_a_skin_that_no_mesh_uses_gives_no_mesh(tmp_path):

@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
 from ..retarget.character import Character
-from ..retarget.gltf_character import buffer_bytes, open_gltf, read_uri
+from ..retarget.gltf_file import buffer_bytes, open_gltf, read_uri
 from ..types import MotionClip
 from .gltf import one_hemisphere
 from .vrm import GlbBuilder

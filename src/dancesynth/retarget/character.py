@@ -2,8 +2,8 @@
 
 ``load_character(spec)`` takes a built-in's name (``rigs.LAYOUTS``) or a file: a BVH (its
 joint names, hierarchy and offsets are the rig; its rest pose is the zero rotation), or a
-glTF/GLB/VRM (0.x or 1.0) model, whose skin's joints, node rest pose and, for VRM, humanoid
-bone table define the target. Bones are found by ``humanoid.find_bones``; a TOML file
+glTF/GLB/VRM (0.x or 1.0) model, whose skin's joints (or, for a VRM without a skin, its
+humanoid bones' nodes), node rest pose and, for VRM, humanoid bone table define the target. Bones are found by ``humanoid.find_bones``; a TOML file
 (``[bones]``, humanoid bone = joint name) overrides what it finds.
 """
 
