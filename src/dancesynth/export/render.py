@@ -39,6 +39,7 @@ FOLLOW_SIGMA_S = 0.6         # low-pass of the root path the camera follows
 GRID_STEP_M = 0.5            # floor grid spacing
 GRID_RADIUS_M = 5.0          # grid fades out at this distance from the dancer
 NEAR_M = 0.2                 # near clipping plane
+MAX_SHADOW_RADIUS_M = 0.2    # no shadow bone is thicker than a torso
 
 SKY_TOP = (214, 224, 236)
 SKY_HORIZON = (244, 246, 249)
@@ -409,7 +410,8 @@ def _mesh_shadow(mesh, fig: Figure, skeleton) -> tuple[np.ndarray, np.ndarray]:
     point_parent = np.concatenate([skeleton.parents, fig.end_joints])
     bones = np.stack([point_parent[1:], np.arange(1, len(point_parent))], axis=1)
     rest = pose_points(mesh.bind_rot, mesh.bind_pos, fig)
-    radius = mesh.shadow_radii(rest, bones)
+    # Capped at a body's half-width: a prop hanging from a bone (a VRM's flat panel) is not a limb.
+    radius = np.minimum(mesh.shadow_radii(rest, bones), MAX_SHADOW_RADIUS_M)
     keep = radius > 0
     return bones[keep], radius[keep]
 
