@@ -192,6 +192,28 @@ def test_a_rig_without_a_mesh_downloads_its_skeleton_and_dance(server):
     assert "LHipJoint" in [n.get("name") for n in gltf["nodes"]]
 
 
+def test_a_character_in_its_rest_pose_is_served_as_glb_for_the_live_page(server):
+    """``/api/characters/{name}.glb``: the built-in standing in its rest pose, its joints named as in the
+    live hierarchy (the mannequin with its skinned mesh, a rig without); anything else is a 404."""
+    from dancesynth.retarget.character import load_character
+
+    status, headers, data = request(server, "GET", "/api/characters/mannequin.glb")
+    assert status == 200 and headers["content-type"] == "model/gltf-binary"
+    gltf = glb_json(data)
+    assert gltf["meshes"] and gltf["skins"]
+    names = [gltf["nodes"][j]["name"] for j in gltf["skins"][0]["joints"]]
+    mannequin = load_character("mannequin")
+    assert names == list(mannequin.skeleton.names)
+    assert gltf["nodes"][0]["translation"] == pytest.approx(list(mannequin.rest_root))
+    status, _, data = request(server, "GET", "/api/characters/cmu.glb")
+    gltf = glb_json(data)
+    assert status == 200 and not gltf.get("meshes") and "LHipJoint" in [n.get("name") for n in gltf["nodes"]]
+    for path in ("/api/characters/robot.glb", "/api/characters/..%2F..%2Fetc%2Fpasswd.glb"):
+        status, _, data = request(server, "GET", path)
+        assert status == 404, data[:200]
+    assert "no character named 'robot'" in json.loads(request(server, "GET", "/api/characters/robot.glb")[2])["error"]
+
+
 def ffprobe(path: Path) -> dict:
     out = subprocess.run(["ffprobe", "-v", "error", "-show_streams", "-show_format", "-of", "json", str(path)],
                          capture_output=True, text=True, timeout=30, check=True).stdout
@@ -400,13 +422,33 @@ def live_messages(server, query: str, timeout_s: float = 40.0):
 
 
 def test_live_streams_audio_hierarchy_frames_and_beats(server, music_http):
+    """One viewer on the default character (the mannequin) and, at the same time, one of the same stream
+    on another: two broadcasts, each on its character's rig."""
     from urllib.parse import urlencode
 
     from dancesynth.io.bvh import parse_bvh
+    from dancesynth.retarget.rigs import rig_skeleton
 
     url = f"{music_http}/{TRUMPET.name}"
     t0 = time.monotonic()
-    messages, audio = live_messages(server, urlencode({"url": url, "segment_s": 2}))
+    on_cmu = {}
+    other = threading.Thread(target=lambda: on_cmu.update(
+        zip(("messages", "audio"), live_messages(server, urlencode({"url": url, "segment_s": 2, "character": "cmu"})))))
+    other.start()
+    streams = []
+
+    def poll_streams():
+        while other.is_alive():
+            streams.append(json.loads(request(server, "GET", "/api/live")[2])["streams"])
+            time.sleep(0.5)
+
+    poller = threading.Thread(target=poll_streams)
+    poller.start()
+    try:
+        messages, audio = live_messages(server, urlencode({"url": url, "segment_s": 2}))
+    finally:
+        other.join(timeout=60)
+        poller.join(timeout=10)
     kinds = [m["type"] for m in messages]
     assert kinds[0] == "start" and kinds[-1] == "end", messages[-1]
     assert kinds.count("hierarchy") == 1 and kinds.index("hierarchy") < kinds.index("frames")
@@ -424,6 +466,17 @@ def test_live_streams_audio_hierarchy_frames_and_beats(server, music_http):
     assert abs(clip.n_frames / 30 - duration) < 0.5
     beats = [t for m in messages if m["type"] == "beats" for t in m["beats"]]
     assert len(beats) >= 3 and np.all(np.diff(beats) > 0)
+    # Retargeted onto the mannequin: its rig in the header (the joints the page's GLB has), standing on the floor.
+    assert messages[0]["character"] == "mannequin"
+    assert sorted(clip.skeleton.names) == sorted(rig_skeleton("mannequin")[0].names)
+    assert 0.7 < clip.root_pos[:, 1].mean() < 1.1, "the hips are not at the mannequin's height"
+    # The other viewer chose cmu: its own broadcast, on the cmu rig, beside the mannequin's.
+    others = on_cmu["messages"]
+    assert others[0]["character"] == "cmu" and others[-1]["type"] == "end", others[-1]
+    cmu = next(m for m in others if m["type"] == "hierarchy")["bvh"]
+    assert "LHipJoint" in cmu and "LHipJoint" not in hierarchy["bvh"]
+    assert any(sorted((s["character"], s["viewers"]) for s in seen) == [("cmu", 1), ("mannequin", 1)]
+               for seen in streams), streams
 
 
 def test_a_client_that_leaves_mid_stream_stops_the_live_dance(server, music_http):
@@ -448,11 +501,43 @@ def test_a_client_that_leaves_mid_stream_stops_the_live_dance(server, music_http
     ("url=/etc/passwd", "http"), ("url=-", "http"), ("", "http"),
     ("url=http://127.0.0.1:9/x.ogg&segment_s=abc", "segment_s"),
     ("url=http://127.0.0.1:9/nothing.ogg", "no audio"),
+    ("url=http://127.0.0.1:9/x.ogg&character=robot", "unknown character 'robot'; pick one of mannequin"),
+    ("url=http://127.0.0.1:9/x.ogg&character=/etc/passwd", "unknown character"),
+    ("url=http://127.0.0.1:9/x.ogg&character=tests%2Fdata%2Fa.bvh", "unknown character"),
 ])
 def test_live_refuses_bad_streams_with_a_message(server, query, words):
     messages, _ = live_messages(server, query, timeout_s=30)
     assert messages[-1]["type"] == "error", messages
     assert words in messages[-1]["error"]
+
+
+def test_live_audio_is_relayed_in_pieces_and_nothing_is_held_back():
+    """The stream's ~20 ms reads go to the viewers in pieces of at least RELAY_S (fewer sends for 50 viewers);
+    a read that finds nothing (a stall) and the end hand on what is held, so no audio waits or is lost."""
+    from types import SimpleNamespace
+
+    from dancesynth.web.live import RELAY_S, _RelaySource
+
+    sr = 22050
+    reads = [np.full(441, 0.5, np.float32)] * 7 + [None] + [np.full(441, -0.25, np.float32)] * 3
+
+    class Source:
+        sr, spec, error = 22050, "test", ""
+
+        def read(self, timeout):
+            if not reads:
+                raise StopIteration
+            samples = reads.pop(0)
+            return None if samples is None else SimpleNamespace(samples=samples)
+
+    sent = []
+    relay = _RelaySource(Source(), sent.append, int(RELAY_S * sr))
+    with pytest.raises(StopIteration):
+        while True:
+            relay.read(0.05)
+    pieces = [np.frombuffer(b, "<i2") for b in sent]
+    assert [len(x) for x in pieces] == [2205, 882, 1323]  # 5 reads; the 2 before the stall; the 3 before the end
+    assert np.all(pieces[0] == 16383) and np.all(pieces[2] == -8191)
 
 
 def _browser_missing() -> str | None:
@@ -492,20 +577,28 @@ def stick_pixels(img: np.ndarray) -> np.ndarray:
     return (r > 150) & (r - b > 90) & (g > 50) & (g - b > 60)
 
 
-def mannequin_colours() -> np.ndarray:
-    """The mannequin mesh's vertex colours (linear RGB) as the sRGB the page draws them in, 0..255."""
-    from dancesynth.retarget.character import load_character
-
-    linear = np.unique(load_character("mannequin").mesh.colours.round(4), axis=0)
+def srgb(linear: np.ndarray) -> np.ndarray:
+    """Linear RGB 0..1 (a vertex colour) as the sRGB the page draws it in, 0..255."""
     return 255 * np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1 / 2.4) - 0.055)
 
 
-def mannequin_pixels(img: np.ndarray) -> tuple[np.ndarray, list[int]]:
-    """Pixels of the mannequin's colours, whatever the light (same hue and saturation: chromaticity
-    within 0.03, and brighter than the background), and how many of each colour."""
+def mannequin_colours() -> np.ndarray:
+    """The mannequin mesh's vertex colours as the sRGB the page draws them in, 0..255."""
+    from dancesynth.retarget.character import load_character
+
+    return srgb(np.unique(load_character("mannequin").mesh.colours.round(4), axis=0))
+
+
+def colour_mask(img: np.ndarray, colour: np.ndarray) -> np.ndarray:
+    """Pixels of ``colour`` (sRGB) whatever the light: the same hue and saturation (chromaticity within
+    0.03), and brighter than the background."""
     chroma = img / np.maximum(img.sum(axis=2, keepdims=True), 1)
-    lit = img.sum(axis=2) > 120
-    masks = [lit & (np.linalg.norm(chroma - c / c.sum(), axis=2) < 0.03) for c in mannequin_colours()]
+    return (img.sum(axis=2) > 120) & (np.linalg.norm(chroma - colour / colour.sum(), axis=2) < 0.03)
+
+
+def mannequin_pixels(img: np.ndarray) -> tuple[np.ndarray, list[int]]:
+    """Pixels of the mannequin's colours, and how many of each colour."""
+    masks = [colour_mask(img, c) for c in mannequin_colours()]
     return np.any(masks, axis=0), [int(m.sum()) for m in masks]
 
 
@@ -587,11 +680,33 @@ def test_the_page_dances_another_engine_on_a_rig_and_downloads_its_video(server,
     assert_video_with_song(tmp_path / "dance.mp4")
 
 
+LIVE_SHOTS = Path("/tmp/web_live_shots")  # the live test's screenshots, kept to look at
+
+
+def palette_counts(img: np.ndarray) -> dict[str, int]:
+    """How many pixels show each of the mannequin's colours by name (skin, top, trousers, shoes, hair)."""
+    from dancesynth.retarget.mannequin import PALETTE
+
+    return {name: int(colour_mask(img, srgb(c)).sum()) for name, c in PALETTE.items()}
+
+
 @needs_browser
 def test_the_page_dances_live_to_a_stream_in_headless_chromium(server, music_http, tmp_path):
-    report = run_viewer(server, tmp_path, "live", f"{music_http}/{TRUMPET.name}")
-    assert_dancing(tmp_path)
+    """Live, the mannequin dances (its skinned mesh, in its coral top and navy trousers) from the streamed
+    frames; the stick figure is still on the toggle; the delay keeps the motion ahead of the music."""
+    from PIL import Image
+
+    report = run_viewer(server, tmp_path, "live", f"{music_http}/{TRUMPET.name}", stick=True)
+    shutil.copytree(tmp_path, LIVE_SHOTS, dirs_exist_ok=True)
     live = report["page"]["live"]
+    assert live["character"] == "mannequin" and live["model"] == "ready", live
+    assert report["view_live"] == "character"
+    assert_dancing(tmp_path, "ab", figure="mannequin")
+    for shot in "ab":
+        counts = palette_counts(np.asarray(Image.open(tmp_path / f"{shot}.png").convert("RGB")).astype(int))
+        assert counts["top"] > 300 and counts["trousers"] > 300, (shot, counts)
+    assert report["view_after_toggle"] == "stick"
+    assert_dancing(tmp_path, "cd", figure="stick")
     assert live["frames"] > 45 and live["beats"] >= 2
     # The delay the server asks for is enough: the motion of every moment heard had arrived.
     assert live["delay_s"] == pytest.approx(2 + 1.5 + 1.0)

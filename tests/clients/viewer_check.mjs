@@ -4,9 +4,10 @@
 // Run by tests/test_serve.py as
 //     node tests/clients/viewer_check.mjs URL OUT_DIR song SONG_SUBSTRING [CHROMIUM] [OPTIONS]
 //         pick a bundled song, press Dance, play it;
-//     node tests/clients/viewer_check.mjs URL OUT_DIR live STREAM_URL [CHROMIUM]
-//         dance live to an http stream (2 s segments), played with the delay the server asks for.
-// OPTIONS (song mode), JSON: {"engine": .., "character": ..} choose them before Dance;
+//     node tests/clients/viewer_check.mjs URL OUT_DIR live STREAM_URL [CHROMIUM] [OPTIONS]
+//         dance live to an http stream (2 s segments), played with the delay the server asks for;
+//         the shots wait for the character's mesh (if it has one) as well as for the motion.
+// OPTIONS, JSON: {"engine": .., "character": ..} choose them before Dance (live: the character only);
 // "stick": true also switches to the stick figure and takes c.png and d.png;
 // "playback": true pauses, seeks and plays to the end, noting the status line each time;
 // "video": true presses the MP4 button and saves the download as OUT_DIR/dance.mp4.
@@ -51,12 +52,17 @@ try {
 	if (mode === 'live') {
 		await page.fill('#live-url', value);
 		await page.fill('#live-segment', '2');
+		if (options.character) await page.selectOption('#live-character', options.character);
 		await page.click('#go-live');
-		await page.waitForFunction(() => ['error', 'closed'].includes(window.dancesynth.live.state) ||
-			(window.dancesynth.live.time > 1.0 && window.dancesynth.live.frames > 45), null, { timeout: 40000 });
+		await page.waitForFunction(() => {
+			const live = window.dancesynth.live;
+			return ['error', 'closed'].includes(live.state) ||
+				(live.time > 1.0 && live.frames > 45 && live.model !== 'loading');
+		}, null, { timeout: 40000 });
 		report.timings.live_dancing_ms = since();
 		report.page = await pageState();
 		if (report.page.live.error || report.page.live.state === 'closed') throw new Error(`live failed: ${report.page.live.error}`);
+		report.view_live = report.page.view;
 		clock = () => window.dancesynth.live.time;
 	} else {
 		const option = await page.evaluate((part) => {
@@ -94,7 +100,7 @@ try {
 	if (options.stick) {
 		await page.selectOption('#figure', 'stick');
 		report.view_after_toggle = await page.evaluate(() => window.dancesynth.view);
-		await playFrom(page, 0.5, 1.0); // the song may have ended meanwhile
+		if (mode !== 'live') await playFrom(page, 0.5, 1.0); // the song may have ended meanwhile
 		await shots(['c', 'd']);
 	}
 	if (options.playback) await checkPlayback(page, statusText);

@@ -1,16 +1,20 @@
 """Live dances shared by every viewer of the same stream.
 
-One ``Broadcast`` per stream (URL, segment length, style, seed) runs ``run_live`` in
-a thread and fans its messages out to the viewers' own queues. Publishing never
+One ``Broadcast`` per stream (URL, segment length, style, seed, character) runs ``run_live``
+in a thread, moves each segment onto the character (one ``SegmentRetargeter``, so every viewer
+sees the same rig on the same floor) and fans its messages out to the viewers' own queues.
+Viewers of one URL who chose different characters watch different broadcasts: the motion is
+retargeted once per broadcast, never per viewer, so 50 viewers cost one dance. Publishing never
 waits: a viewer that falls more than ``max_lag_s`` of audio behind is dropped with a
 message, so a slow connection never slows the dance or the other viewers. A bounded
 backlog (the last ``delay_s`` of audio, the frames and beats from there on) lets a
 viewer join late and still see motion and music in sync, at everyone's delay.
 
 Messages, in order: ``start`` (sample rate, fps, ``start_s`` the stream time of the
-first audio sample this viewer gets, ``delay_s`` how long to buffer before playing),
-binary 16-bit mono PCM, ``hierarchy`` once, ``frames`` (BVH rows from ``start_frame``),
-``beats`` (stream times), then ``end`` (a summary) or ``error``.
+first audio sample this viewer gets, ``delay_s`` how long to buffer before playing, the
+``character``), binary 16-bit mono PCM, ``hierarchy`` once (the character's skeleton as a
+BVH header: its joints are named as the nodes of ``/api/characters/{name}.glb``), ``frames``
+(BVH rows from ``start_frame``), ``beats`` (stream times), then ``end`` (a summary) or ``error``.
 """
 
 from __future__ import annotations
@@ -33,6 +37,10 @@ from ..live.sources import SR
 # arrives, plus the step; the margin covers the step and network jitter.
 DELAY_MARGIN_S = 1.0
 MIN_JOIN_DELAY_S = 0.3
+# Audio goes to the viewers in pieces of at least this much: the source's own reads are ~20 ms, and
+# 50 viewers x 50 sends a second kept the event loop so busy that, beside 100 dances, every viewer fell
+# behind (benchmarks/serve_load.py). A stall or the end sends what is held at once.
+RELAY_S = 0.1
 
 
 def playback_delay_s(segment_s: float) -> float:
@@ -68,8 +76,11 @@ class Broadcast:
     """One stream danced once and watched by many; lives on the event loop, its dance in a thread."""
 
     def __init__(self, url: str, config, *, loop: asyncio.AbstractEventLoop, max_lag_s: float, on_over,
-                 realtime: bool = True, stats: dict | None = None):
+                 realtime: bool = True, stats: dict | None = None, character: str = "mannequin",
+                 load_character=None):
         self.url, self.config, self.loop = url, config, loop
+        self.character = character
+        self._load_character = load_character or _load_character
         self.max_lag_s, self.realtime = max_lag_s, realtime
         self.stats = stats if stats is not None else {"dropped_viewers": 0, "viewers": 0}
         self.delay_s = playback_delay_s(config.segment_s)
@@ -92,13 +103,16 @@ class Broadcast:
         from ..io.bvh_writer import bvh_parts
         from ..live.runtime import run_live
         from ..live.sources import AudioSource, broke_off
+        from ..retarget import SegmentRetargeter
 
         def post(fn, *args):
             if not self.stop.is_set():
                 self.loop.call_soon_threadsafe(fn, *args)
 
+        on_character = None
+
         def on_frames(clip):
-            hierarchy, rows = bvh_parts(clip)
+            hierarchy, rows = bvh_parts(on_character(clip))
             post(self._publish_frames, hierarchy, clip.fps, rows)
 
         def on_report(report):
@@ -106,11 +120,14 @@ class Broadcast:
                                "tempo_bpm": round(float(report.tempo_bpm), 2)})
             post(self._publish_beats, report.beat_times_s, text)
 
-        source = None
+        source = relay = None
         try:
+            # Loaded here, not on the event loop: the mannequin's mesh takes a second the first time.
+            on_character = SegmentRetargeter(self._load_character(self.character))
             source = AudioSource(self.url, realtime=self.realtime)
-            summary = run_live(_RelaySource(source, lambda pcm: post(self._publish_audio, pcm)), on_frames,
-                               config=self.config, on_report=on_report, realtime=self.realtime, stop=self.stop)
+            relay = _RelaySource(source, lambda pcm: post(self._publish_audio, pcm), int(RELAY_S * source.sr))
+            summary = run_live(relay, on_frames, config=self.config, on_report=on_report, realtime=self.realtime,
+                               stop=self.stop)
             plain = {k: v for k, v in summary.items() if isinstance(v, (int, float, str, type(None)))}
             died = broke_off(source)
             # A source that died is an error for every viewer, not an end they could take for the song's.
@@ -121,6 +138,8 @@ class Broadcast:
         except Exception as exc:  # noqa: BLE001 - a viewer gets a message, never a traceback
             final = {"type": "error", "error": f"internal error: {type(exc).__name__}"}
         finally:
+            if relay is not None:
+                relay.flush()  # the last of the music, before the end
             if source is not None:
                 source.close()
         try:
@@ -175,7 +194,8 @@ class Broadcast:
         start_s = self._backlog_start_s()
         backlog_s = self._samples / SR - start_s
         start = {"type": "start", "sr": SR, "fps": self.config.fps, "segment_s": self.config.segment_s,
-                 "start_s": round(start_s, 6), "delay_s": max(self.delay_s - backlog_s, MIN_JOIN_DELAY_S)}
+                 "start_s": round(start_s, 6), "delay_s": max(self.delay_s - backlog_s, MIN_JOIN_DELAY_S),
+                 "character": self.character}
         messages = [json.dumps(start)]
         messages += [self._hierarchy] if self._hierarchy else []
         messages += [text for *_, text in self._frames] + [text for _, text in self._beats]
@@ -204,28 +224,47 @@ class Broadcast:
         self._on_over(self)
 
     def status(self) -> dict:
-        return {"url": self.url, "segment_s": self.config.segment_s, "viewers": len(self.viewers),
+        return {"url": self.url, "segment_s": self.config.segment_s, "character": self.character,
+                "viewers": len(self.viewers),
                 "dropped_viewers": self.dropped,
                 "max_viewer_lag_s": round(max((v.lag_s for v in self.viewers), default=0.0), 2), "heard_s": round(self._samples / SR, 2),
                 "frames": self._n_frames, "delay_s": self.delay_s, "over": self.final is not None}
 
 
 class _RelaySource:
-    """An ``AudioSource`` whose chunks are also handed on as 16-bit PCM."""
+    """An ``AudioSource`` whose chunks are also handed on as 16-bit PCM, in pieces of at least
+    ``min_samples`` (a read that finds nothing, or the end, hands on what is held)."""
 
-    def __init__(self, source, relay):
-        self._source, self._relay = source, relay
+    def __init__(self, source, relay, min_samples: int = 1):
+        self._source, self._relay, self._min = source, relay, min_samples
         self.sr, self.spec = source.sr, source.spec
+        self._held: list[np.ndarray] = []
+        self._n_held = 0
 
     @property
     def error(self) -> str:
         return self._source.error
 
     def read(self, timeout: float):
-        chunk = self._source.read(timeout)
+        try:
+            chunk = self._source.read(timeout)
+        except StopIteration:
+            self.flush()
+            raise
         if chunk is not None and chunk.samples.size:
-            self._relay((np.clip(chunk.samples, -1.0, 1.0) * 32767.0).astype("<i2").tobytes())
+            self._held.append((np.clip(chunk.samples, -1.0, 1.0) * 32767.0).astype("<i2"))
+            self._n_held += chunk.samples.size
+            if self._n_held >= self._min:
+                self.flush()
+        else:
+            self.flush()  # a stall: nothing is kept waiting for more
         return chunk
+
+    def flush(self) -> None:
+        if self._n_held:
+            pcm = np.concatenate(self._held).tobytes()
+            self._held, self._n_held = [], 0
+            self._relay(pcm)
 
 
 class LiveHub:
@@ -235,24 +274,28 @@ class LiveHub:
     (no pacing, no stall bridging), for tests and benchmarks.
     """
 
-    def __init__(self, database, *, max_streams: int = 2, max_lag_s: float = 20.0, realtime: bool = True):
+    def __init__(self, database, *, max_streams: int = 2, max_lag_s: float = 20.0, realtime: bool = True,
+                 load_character=None):
         self.database, self.max_streams, self.max_lag_s = database, max_streams, max_lag_s
         self.realtime = realtime
+        self.load_character = load_character   # a built-in's name -> Character (the server caches them)
         self.broadcasts: dict[tuple, Broadcast] = {}
         self.stats = {"viewers": 0, "dropped_viewers": 0}   # since the server started
 
-    def join(self, url: str, segment_s: float, style: str | None, seed: int | None) -> tuple[Broadcast, Viewer]:
+    def join(self, url: str, segment_s: float, style: str | None, seed: int | None,
+             character: str = "mannequin") -> tuple[Broadcast, Viewer]:
         from ..live.runtime import LiveConfig
 
-        key = (url, segment_s, style, seed)
+        key = (url, segment_s, style, seed, character)
         broadcast = self.broadcasts.get(key)
         if broadcast is None:
             if len(self.broadcasts) >= self.max_streams:
                 raise _Busy(f"the server already dances to {self.max_streams} streams; watch one of them "
-                            "(the same URL and settings) or try again later")
+                            "(the same URL, settings and character) or try again later")
             config = LiveConfig(segment_s=segment_s, style=style, seed=seed, database=self.database)
             broadcast = Broadcast(url, config, loop=asyncio.get_running_loop(), max_lag_s=self.max_lag_s,
-                                  on_over=self._forget, realtime=self.realtime, stats=self.stats)
+                                  on_over=self._forget, realtime=self.realtime, stats=self.stats,
+                                  character=character, load_character=self.load_character)
             self.broadcasts[key] = broadcast
         return broadcast, broadcast.join()
 
@@ -271,6 +314,12 @@ class _Busy(DanceSynthError):
     pass
 
 
+def _load_character(name: str):
+    from ..retarget.character import load_character
+
+    return load_character(name)
+
+
 def parse_seed(text: str | None) -> int | None | bool:
     """A seed sent by the page: None when empty, the number, or False when it is no whole number
     from 0 to ``MAX_SEED`` ("-1", "--5", "abc")."""
@@ -280,7 +329,12 @@ def parse_seed(text: str | None) -> int | None | bool:
 
 
 async def watch(ws, hub: LiveHub) -> None:
-    """Serve one viewer of ``/ws/live?url=...&segment_s=...&style=...&seed=...`` until the dance or the viewer ends."""
+    """Serve one viewer of ``/ws/live?url=...&segment_s=...&style=...&seed=...&character=...`` until the dance
+    or the viewer ends. ``character`` is a built-in (``retarget.rigs.LAYOUTS``; default the mannequin): a path
+    would load a file from the server's disk."""
+    from ..retarget.character import DEFAULT_CHARACTER
+    from ..retarget.rigs import LAYOUTS
+
     q = ws.query_params
     url = q.get("url", "").strip()
     try:
@@ -288,12 +342,16 @@ async def watch(ws, hub: LiveHub) -> None:
     except ValueError:
         segment_s = None
     seed = parse_seed(q.get("seed"))
+    character = q.get("character", "").strip() or DEFAULT_CHARACTER
     if not url.startswith(("http://", "https://")):
         return await _refuse(ws, "give the stream as ?url=http(s)://...")
     if segment_s is None or not 1.0 <= segment_s <= 30.0 or seed is False:
         return await _refuse(ws, "segment_s must be a number from 1 to 30 and seed a whole number")
+    if character not in LAYOUTS:
+        return await _refuse(ws, f"unknown character {character[:40]!r}; pick one of {', '.join(LAYOUTS)} "
+                                 "(/api/characters)")
     try:
-        broadcast, viewer = hub.join(url, segment_s, q.get("style") or None, seed)
+        broadcast, viewer = hub.join(url, segment_s, q.get("style") or None, seed, character)
     except _Busy as exc:
         return await _refuse(ws, str(exc))
     viewer.sender = asyncio.create_task(_pump(ws, viewer, broadcast))

@@ -7,8 +7,10 @@ the chosen character (``retarget``) and answers the BVH text (the stick figure o
 character's rig), the music's beats and sections, a URL the page plays the song from and
 the dance's own URLs (``/api/dances/{id}/...``: GLB with the skinned mesh, for the page to
 show, and downloads as BVH, GLB, VRMA and an MP4 rendered with the song; ``web/dances.py``
-keeps the last few dances). ``/ws/live?url=`` dances to a stream,
-shared by everyone who watches it (``web/live.py``); ``/api/live`` lists those streams. The page drives the animation from
+keeps the last few dances). ``/ws/live?url=&character=`` dances to a stream on a built-in
+character, shared by everyone who watches it (``web/live.py``); ``/api/live`` lists those
+streams; ``/api/characters/{name}.glb`` is a character in its rest pose, which the page poses
+from the live frames. The page drives the animation from
 the audio element's clock, so motion and music stay in sync through seeks and pauses.
 
 The server is thin: it parses, calls one library function and reports. Errors a
@@ -252,7 +254,8 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
     store = UploadStore(max_files=max_stored_uploads)
     songs = {s["name"]: s for s in bundled_songs()}
     dances = DanceQueue(max_concurrent_dances, max_waiting_dances)
-    hub = LiveHub(database, max_streams=max_live_streams, max_lag_s=max_viewer_lag_s, realtime=live_realtime)
+    hub = LiveHub(database, max_streams=max_live_streams, max_lag_s=max_viewer_lag_s, realtime=live_realtime,
+                  load_character=_character)
     kept = DanceStore(max_dances=max_stored_dances, max_renders=max_renders, max_waiting_renders=max_waiting_renders,
                       video_size=video_size)
     default_engine = DanceConfig().engine
@@ -277,6 +280,15 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
             characters_cache.extend({"name": c.name, "description": DESCRIPTIONS.get(c.name, ""),
                                      "mesh": c.mesh is not None, "joints": c.skeleton.n_joints} for c in loaded)
         return JSONResponse({"characters": characters_cache, "default": DEFAULT_CHARACTER})
+
+    async def api_character_glb(request: Request) -> Response:
+        """A built-in character in its rest pose as GLB (the skinned mesh, if it has one): the page poses
+        it from the frames of a live dance, whose joints are named as its nodes."""
+        name = request.path_params["name"]
+        if name not in LAYOUTS:
+            return _error(404, f"no character named {name[:40]!r}; pick one of {', '.join(LAYOUTS)} (/api/characters)")
+        data = await run_in_threadpool(_rest_glb, name)
+        return Response(data, media_type="model/gltf-binary", headers={"Cache-Control": "max-age=3600"})
 
     async def api_songs(request: Request) -> Response:
         return JSONResponse({"songs": list(songs.values())})
@@ -446,6 +458,7 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
         Route("/api/dance", api_dance, methods=["POST"]),
         Route("/api/engines", api_engines),
         Route("/api/characters", api_characters),
+        Route("/api/characters/{name}.glb", api_character_glb),
         Route("/api/dances/{key}/dance.{kind}", api_dance_file),
         Route("/api/dances/{key}/video", api_video, methods=["GET", "POST"]),
         Route("/api/live", api_live),
@@ -518,6 +531,17 @@ def _character(name: str):
     from ..retarget.character import load_character
 
     return load_character(name)
+
+
+@functools.lru_cache(maxsize=None)
+def _rest_glb(name: str) -> bytes:
+    """A built-in character standing in its rest pose (one frame), as GLB bytes, made once."""
+    from ..export.formats import encode_dance
+    from ..types import MotionClip
+
+    target = _character(name)
+    rest = MotionClip(target.skeleton, 30.0, target.rest_root[None], target.rest_rot[None])
+    return encode_dance(".glb", rest, target)
 
 
 def _make_dance(song_path: Path, style: str | None, seed: int | None, engine: str, character: str,

@@ -2,7 +2,8 @@
 // from the audio element's clock (so seeking and pausing keep motion and music in sync),
 // and flash a ring on the floor on every music beat. The character is the skinned mesh the
 // server sends as GLB; the stick figure (from the BVH, on the same rig) is the other view,
-// and the only one for a rig without a mesh and for live streams.
+// and the only one for a rig without a mesh. Live, the character is its rest-pose GLB posed
+// by the frames the server streams (the same rig, its joints named as the GLB's nodes).
 import * as THREE from 'three';
 import { BVHLoader } from 'three/addons/loaders/BVHLoader.js';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
@@ -110,17 +111,24 @@ function buildStick(bvhText) {
 	return animated(group, root, result.clip, limbs);
 }
 
-async function buildCharacter(glbUrl) {
+// A GLB's scene, its skeleton's root bone and its animations. The loader names nodes as the mixer reads
+// them (mixerName), as buildStick names the bones: a BVH's clip of the same rig poses this scene.
+async function loadModel(glbUrl) {
 	const response = await fetch(glbUrl);
 	if (!response.ok) await readJSON(response); // throws the server's message
 	const gltf = await new GLTFLoader().parseAsync(await response.arrayBuffer(), '');
-	if (!gltf.animations.length) throw new Error('the character has no animation');
 	let hips = null;
 	gltf.scene.traverse((o) => {
 		// A skinned mesh's bounds are those of its rest pose: never cull it as it dances away from them.
 		if (o.isSkinnedMesh) { o.frustumCulled = false; hips = hips || o.skeleton.bones[0]; }
 	});
-	return animated(gltf.scene, hips || gltf.scene, gltf.animations[0]);
+	return { scene: gltf.scene, hips: hips || gltf.scene, animations: gltf.animations };
+}
+
+async function buildCharacter(glbUrl) {
+	const model = await loadModel(glbUrl);
+	if (!model.animations.length) throw new Error('the character has no animation');
+	return animated(model.scene, model.hips, model.animations[0]);
 }
 
 let wantedFigure = 'character'; // what the user chose to see
@@ -138,8 +146,8 @@ function showDance(next) {
 	updateView();
 }
 
-// Without a character (a rig without a mesh, a live stream) the stick figure only, until a dance with
-// one brings back the choice made.
+// Without a character (a rig without a mesh, a live one still loading) the stick figure only, until a
+// dance with one brings back the choice made.
 function offerFigures(hasCharacter) {
 	$('figure').options[0].disabled = !hasCharacter;
 	$('figure').value = hasCharacter ? wantedFigure : 'stick';
@@ -294,6 +302,11 @@ function postDance(form) {
 		: 'Listening to the music and choreographing…'));
 }
 
+let characterInfo = {}; // the built-in characters by name: { name, description, mesh, joints }
+
+// A character's name in the menus: a rig without a mesh dances as a stick figure.
+const characterLabel = (c) => (c.mesh ? c.name : `${c.name} rig (stick figure)`);
+
 async function loadChoices() {
 	const [songs, styles, engines, characters] = await Promise.all(
 		['/api/songs', '/api/styles', '/api/engines', '/api/characters'].map((url) => getJSON(url)));
@@ -309,11 +322,14 @@ async function loadChoices() {
 	}
 	$('engine').value = engines.default;
 	for (const c of characters.characters) {
-		const option = new Option(c.mesh ? c.name : `${c.name} rig (stick figure)`, c.name);
-		option.title = c.description;
-		$('character').add(option);
+		for (const menu of ['character', 'live-character']) {
+			const option = new Option(characterLabel(c), c.name);
+			option.title = c.description;
+			$(menu).add(option);
+		}
 	}
-	$('character').value = characters.default;
+	$('character').value = $('live-character').value = characters.default;
+	characterInfo = Object.fromEntries(characters.characters.map((c) => [c.name, c]));
 	if (songs.songs.length) $('song').value = songs.songs[0].name;
 }
 
@@ -432,9 +448,11 @@ async function downloadVideo() {
 }
 
 // ---- live mode: the server dances to a stream; the page plays its audio after a delay ------
-// The server relays the stream's audio as 16-bit PCM, the BVH hierarchy once, and every
-// segment's frames and beats. Audio is scheduled with Web Audio `delay_s` after it arrives,
-// the delay the double buffer needs for the motion of each moment to be here before it is heard.
+// The server relays the stream's audio as 16-bit PCM, the BVH hierarchy once (the chosen
+// character's rig), and every segment's frames and beats. Audio is scheduled with Web Audio
+// `delay_s` after it arrives, the delay the double buffer needs for the motion of each moment
+// to be here before it is heard. The stick figure is built from the frames kept; a character
+// with a mesh is its rest-pose GLB (loaded once) posed by the same animation.
 let live = null;
 const KEEP_S = 60; // the live figure holds the last minute of motion
 
@@ -468,8 +486,34 @@ function liveFrames(startFrame, rows) {
 	if (drop > 0) { live.rows.splice(0, drop); live.base += drop; }
 	const text = `${live.hierarchy}\nMOTION\nFrames: ${live.rows.length}\nFrame Time: ${(1 / live.fps).toFixed(8)}\n` +
 		live.rows.join('\n') + '\n';
-	showDance({ figures: { stick: buildStick(text) }, offset: live.base / live.fps, beats: live.beats, sections: [] });
+	live.stick = buildStick(text);
+	showLive();
 	state.live.frames = startFrame + rows.length;
+}
+
+// The live figures: the stick figure of the frames kept and, once its GLB is here, the character posed by
+// the same animation (the tracks are named as the GLB's nodes, both sanitised by mixerName).
+function showLive() {
+	if (!live.stick) return;
+	const figures = { stick: live.stick };
+	const clip = live.stick.action.getClip();
+	if (live.model && !live.model.checked) {
+		live.model.checked = true;
+		const missing = clip.tracks.map((t) => t.name.slice(0, t.name.lastIndexOf('.')))
+			.filter((name) => !live.model.scene.getObjectByName(name));
+		if (missing.length) liveModelFailed(`its skeleton has no ${missing.slice(0, 3).join(', ')}`);
+	}
+	if (live.model) figures.character = animated(live.model.scene, live.model.hips, clip);
+	showDance({ figures, offset: live.base / live.fps, beats: live.beats, sections: [] });
+}
+
+// The character could not be shown: the stick figure dances on, and the info line says why.
+function liveModelFailed(why) {
+	live.model = null;
+	state.live.model = `error: ${why}`;
+	offerFigures(false);
+	$('info').textContent = `Live: the stick figure on the ${live.character} rig (the ${live.character} ` +
+		`could not be shown: ${why})`;
 }
 
 function startLive(event) {
@@ -478,19 +522,30 @@ function startLive(event) {
 	audio.pause();
 	const url = $('live-url').value.trim();
 	if (!url) { setStatus('Give the URL of a stream (http or https).', true); return; }
+	const character = $('live-character').value;
+	const mesh = Boolean(characterInfo[character] && characterInfo[character].mesh);
 	const params = new URLSearchParams({ url, segment_s: $('live-segment').value || '5', style: $('style').value,
-		seed: $('seed').value });
+		seed: $('seed').value, character });
 	const ws = new WebSocket(`${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws/live?${params}`);
 	ws.binaryType = 'arraybuffer';
 	live = { ws, ctx: new AudioContext(), t0: null, last: null, sr: 22050, samples: 0, fps: 30, delay: 10,
-		start: 0, hierarchy: null, rows: [], base: null, beats: [], time: 0 };
+		start: 0, hierarchy: null, rows: [], base: null, beats: [], time: 0, character, stick: null, model: null };
 	state.live = { state: 'connecting', frames: 0, beats: 0, time: 0, heard_s: 0, error: null, starved_s: 0,
-		playing_s: 0, delay_s: null };
+		playing_s: 0, delay_s: null, character, model: mesh ? 'loading' : null };
 	setStatus('Connecting to the stream…');
-	$('info').textContent = 'Live: the stick figure on the captured skeleton';
-	offerFigures(false);
+	$('info').textContent = mesh ? `Live: the ${character}` : `Live: the stick figure on the ${character} rig`;
+	offerFigures(false); // the stick figure until the character's mesh is here
 	offerDownloads(null);
 	const mine = live;
+	if (mesh) {
+		loadModel(`/api/characters/${encodeURIComponent(character)}.glb`).then((model) => {
+			if (live !== mine) return;
+			live.model = model;
+			state.live.model = 'ready';
+			offerFigures(true);
+			showLive();
+		}).catch((err) => { if (live === mine) liveModelFailed(String(err.message || err)); });
+	}
 	ws.onmessage = (ev) => {
 		if (live !== mine) return;
 		if (typeof ev.data !== 'string') { liveAudio(ev.data); return; }
