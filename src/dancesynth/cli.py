@@ -11,6 +11,7 @@ from pathlib import Path
 
 import click
 
+from .cli_character import characters, dance_character, dance_video, on_dance_character
 from .cli_live import render, serve, stream
 from .cli_support import Progress, bvh_output, writable, write_json
 from .errors import DanceSynthError, InputError
@@ -93,7 +94,7 @@ def dance(song, output, character, bone_map, style, engine, recreate, motif_at, 
     output = output or Path(song.stem + ".bvh")
     suffix = check_format(output)
     writable(output, report_path)
-    target = _character(character, bone_map, suffix)
+    target = dance_character(character, bone_map, suffix)
     config = DanceConfig(style=style, engine=engine, segment_s=segment_seconds, lookahead_s=lookahead, fps=fps,
                          seed=seed, max_duration_s=max_minutes * 60.0, motif_at=motif_at, recreate=recreate,
                          follow_signature=follow_signature)
@@ -116,10 +117,10 @@ def dance(song, output, character, bone_map, style, engine, recreate, motif_at, 
         progress.close()
     t = time.perf_counter()
     report = clip.provenance.report() if report_path is not None else None
-    moved, target = _retargeted(clip, target)
+    moved, target = on_dance_character(clip, target)
     # The dance and the report both or neither: a report that cannot be written leaves no dance behind.
     if suffix == ".mp4":
-        _video(moved, target, song, output, report_path, report, quiet)
+        dance_video(moved, target, song, output, report_path, report, quiet)
     else:
         from .export.formats import encode_dance
 
@@ -171,65 +172,6 @@ def dance(song, output, character, bone_map, style, engine, recreate, motif_at, 
                f"{tm['synthesis_s']:.2f} s, write {tm['write_s']:.2f} s; total {time.perf_counter() - t0:.2f} s")
     click.echo(f"wrote     {output} ({s['frames']} frames at {s['fps']:g} fps, on {target.name}"
                + (f", {moved.skeleton.n_joints} joints" if suffix != ".mp4" else "") + ")")
-
-
-def _character(spec, bone_map, suffix):
-    """The character to dance, checked before any work (a missing Blender, too)."""
-    from .retarget import SOURCE
-    from .retarget.character import DEFAULT_CHARACTER, load_character
-
-    if suffix == ".fbx":
-        from .export.fbx import find_blender
-
-        find_blender()
-    spec = spec or DEFAULT_CHARACTER
-    if spec == SOURCE:
-        if bone_map is not None:
-            raise InputError("--bone-map names the bones of your own --character; it does not apply to 'source'")
-        if suffix == ".vrma":
-            raise InputError("a .vrma is made on a humanoid rig: leave out --character source")
-        return None
-    return load_character(spec, bone_map=bone_map)
-
-
-def _retargeted(clip, target):
-    from .retarget import SOURCE, on_character
-
-    return on_character(clip, SOURCE if target is None else target)
-
-
-def _video(clip, character, song, output, report_path, report, quiet):
-    """``dance -o dance.mp4``: the dance rendered with the song, in one step."""
-    from .export.video import render_video
-
-    progress = Progress(enabled=not quiet and sys.stderr.isatty())
-    try:
-        render_video(clip, song, output, character=character,
-                     progress=lambda done, total: progress("render", done, total))
-    finally:
-        progress.close()
-    if report is not None:
-        try:   # the video and the report both or neither
-            write_json(report_path, report)
-        except BaseException:
-            output.unlink(missing_ok=True)
-            raise
-
-
-@cli.command()
-def characters():
-    """List the built-in characters and rigs a dance can be put on (dance --character NAME)."""
-    from .retarget.character import DEFAULT_CHARACTER, FILE_KINDS
-    from .retarget.rigs import DESCRIPTIONS, rig_skeleton
-
-    w = max(len(n) for n in DESCRIPTIONS) + 2
-    click.echo(f"{'character':<{w}}{'joints':>7}  description")
-    for name, text in DESCRIPTIONS.items():
-        default = " (default)" if name == DEFAULT_CHARACTER else ""
-        click.echo(f"{name:<{w}}{rig_skeleton(name)[0].n_joints:>7}  {text}{default}")
-    click.echo(f"{'source':<{w}}{'':>7}  the skeleton the chosen style was captured on")
-    click.echo("your own: --character FILE, one of " + ", ".join(f"{s} ({k})" for s, k in FILE_KINDS.items())
-               + "; --bone-map FILE.toml names bones the automatic mapping misses")
 
 
 @cli.command()
@@ -499,7 +441,7 @@ def conduct(song, output, melody_track, rhythm_track, style, config_path, params
         click.echo("\n".join(summary_lines(clip.provenance.summary, output)))
 
 
-for _command in (stream, render, serve):  # live and viewing commands, in cli_live.py
+for _command in (stream, render, serve, characters):  # in cli_live.py and cli_character.py
     cli.add_command(_command)
 
 

@@ -1,0 +1,71 @@
+"""Command line, characters: who dances (``dance --character``), the built-ins (``characters``), and
+``dance -o dance.mp4``'s video."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from .cli_support import Progress, write_json
+from .errors import InputError
+
+
+def dance_character(spec, bone_map, suffix):
+    """The character to dance (None: the source skeleton), checked before any work (a missing Blender, too)."""
+    from .retarget import SOURCE
+    from .retarget.character import DEFAULT_CHARACTER, load_character
+
+    if suffix == ".fbx":
+        from .export.fbx import find_blender
+
+        find_blender()
+    spec = spec or DEFAULT_CHARACTER
+    if spec == SOURCE:
+        if bone_map is not None:
+            raise InputError("--bone-map names the bones of your own --character; it does not apply to 'source'")
+        if suffix == ".vrma":
+            raise InputError("a .vrma is made on a humanoid rig: leave out --character source")
+        return None
+    return load_character(spec, bone_map=bone_map)
+
+
+def on_dance_character(clip, target):
+    """``(clip on the character, the Character)`` for ``dance_character``'s choice."""
+    from .retarget import SOURCE, on_character
+
+    return on_character(clip, SOURCE if target is None else target)
+
+
+def dance_video(clip, character, song, output, report_path, report, quiet):
+    """``dance -o dance.mp4``: the dance rendered with the song, in one step."""
+    from .export.video import render_video
+
+    progress = Progress(enabled=not quiet and sys.stderr.isatty())
+    try:
+        render_video(clip, song, output, character=character,
+                     progress=lambda done, total: progress("render", done, total))
+    finally:
+        progress.close()
+    if report is not None:
+        try:   # the video and the report both or neither
+            write_json(report_path, report)
+        except BaseException:
+            output.unlink(missing_ok=True)
+            raise
+
+
+@click.command()
+def characters():
+    """List the built-in characters and rigs a dance can be put on (dance --character NAME)."""
+    from .retarget.character import DEFAULT_CHARACTER, FILE_KINDS
+    from .retarget.rigs import DESCRIPTIONS, rig_skeleton
+
+    w = max(len(n) for n in DESCRIPTIONS) + 2
+    click.echo(f"{'character':<{w}}{'joints':>7}  description")
+    for name, text in DESCRIPTIONS.items():
+        default = " (default)" if name == DEFAULT_CHARACTER else ""
+        click.echo(f"{name:<{w}}{rig_skeleton(name)[0].n_joints:>7}  {text}{default}")
+    click.echo(f"{'source':<{w}}{'':>7}  the skeleton the chosen style was captured on")
+    click.echo("your own: --character FILE, one of " + ", ".join(f"{s} ({k})" for s, k in FILE_KINDS.items())
+               + "; --bone-map FILE.toml names bones the automatic mapping misses")
