@@ -11,9 +11,9 @@ from pathlib import Path
 
 import click
 
-from .cli_character import characters, dance_character, dance_video, on_dance_character
+from .cli_character import characters, dance_character, write_on_character
 from .cli_live import render, serve, stream
-from .cli_support import Progress, bvh_output, writable, write_json
+from .cli_support import Progress, writable, write_json
 from .errors import DanceSynthError, InputError
 from .types import DEFAULT_FPS, MAX_SONG_S, SEGMENT_S
 
@@ -89,7 +89,6 @@ def dance(song, output, character, bone_map, style, engine, recreate, motif_at, 
     """Make a beat-synchronised dance for SONG (wav, ogg, flac, mp3, ...) and write it for your character."""
     from .api import DanceConfig, dance as make_dance
     from .export.formats import check_format
-    from .io.files import atomic_output
 
     output = output or Path(song.stem + ".bvh")
     suffix = check_format(output)
@@ -117,18 +116,8 @@ def dance(song, output, character, bone_map, style, engine, recreate, motif_at, 
         progress.close()
     t = time.perf_counter()
     report = clip.provenance.report() if report_path is not None else None
-    moved, target = on_dance_character(clip, target)
-    # The dance and the report both or neither: a report that cannot be written leaves no dance behind.
-    if suffix == ".mp4":
-        dance_video(moved, target, song, output, report_path, report, quiet)
-    else:
-        from .export.formats import encode_dance
-
-        data = encode_dance(suffix, moved, target)
-        with atomic_output(output, "wb") as fh:
-            fh.write(data)
-            if report is not None:
-                write_json(report_path, report)
+    moved, target = write_on_character(clip, target, output, song=song, report_path=report_path, report=report,
+                                       quiet=quiet)
     s = clip.provenance.summary
     write_s = time.perf_counter() - t
     for warning in s.get("warnings", ()):  # also with --quiet: the dance is not what the user may expect
@@ -414,7 +403,12 @@ def train(style, config_name, device, minutes, out_dir, seed, database, quiet):
 
 @cli.command()
 @click.argument("song", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), help="BVH to write (default: SONG.bvh).")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
+              help="File to write, as for 'dance': .bvh, .glb, .vrma, .fbx or .mp4 (default: SONG.bvh).")
+@click.option("--character", default=None, metavar="NAME|FILE",
+              help="Who conducts, as for 'dance' (default mannequin; 'source': the database's skeleton).")
+@click.option("--bone-map", type=click.Path(dir_okay=False, path_type=Path),
+              help="TOML file naming your character's humanoid bones (as for 'dance').")
 @click.option("--melody-track", type=int, help="MIDI part that carries the melody (see --list-tracks).")
 @click.option("--rhythm-track", type=int, help="MIDI part that gives the beats (default: drums, else the bass).")
 @click.option("--style", help="A look: default, e1, e2, calm, lively.")
@@ -424,19 +418,23 @@ def train(style, config_name, device, minutes, out_dir, seed, database, quiet):
 @click.option("--fps", type=float, default=None, help=f"Frame rate of the output (default {DEFAULT_FPS:g}).")
 @click.option("--list-tracks", is_flag=True, help="List the MIDI parts and the ones chosen, then stop.")
 @click.option("-q", "--quiet", is_flag=True, help="No summary.")
-def conduct(song, output, melody_track, rhythm_track, style, config_path, params, fps, list_tracks, quiet):
+def conduct(song, output, character, bone_map, melody_track, rhythm_track, style, config_path, params, fps,
+            list_tracks, quiet):
     """Upper-body motion drawing SONG's melody and marking its beats (Loi & Li); SONG: MIDI or a recording."""
     from .api import conduct as make_motion
     from .engines.procedural import make_config
     from .engines.procedural.report import parts_lines, summary_lines
-    from .io.bvh import write_bvh
+    from .export.formats import check_format
 
     if list_tracks:
         return click.echo("\n".join(parts_lines(song)))
     output = output or Path(song.stem + ".bvh")
-    bvh_output(output)
+    suffix = check_format(output)
+    writable(output)
+    target = dance_character(character, bone_map, suffix)
     cfg = make_config(style=style, config_path=config_path, params=params, fps=fps)
-    write_bvh(output, clip := make_motion(song, config=cfg, melody_track=melody_track, rhythm_track=rhythm_track))
+    clip = make_motion(song, config=cfg, melody_track=melody_track, rhythm_track=rhythm_track)
+    write_on_character(clip, target, output, song=song, quiet=quiet)
     if not quiet:
         click.echo("\n".join(summary_lines(clip.provenance.summary, output)))
 

@@ -37,8 +37,26 @@ def on_dance_character(clip, target):
     return on_character(clip, SOURCE if target is None else target)
 
 
-def dance_video(clip, character, song, output, report_path, report, quiet):
-    """``dance -o dance.mp4``: the dance rendered with the song, in one step."""
+def write_on_character(clip, target, output, *, song, report_path=None, report=None, quiet=False):
+    """Write ``clip`` put on ``target`` (``dance_character``'s choice) in ``output``'s format, with the
+    report if asked: both or neither. Returns ``(the clip on the character, the Character)``."""
+    from .export.formats import encode_dance
+    from .io.files import atomic_output
+
+    moved, target = on_dance_character(clip, target)
+    if output.suffix.lower() == ".mp4":
+        _video(moved, target, song, output, report_path, report, quiet)
+        return moved, target
+    data = encode_dance(output.suffix.lower(), moved, target)
+    with atomic_output(output, "wb") as fh:
+        fh.write(data)
+        if report is not None:
+            write_json(report_path, report)
+    return moved, target
+
+
+def _video(clip, character, song, output, report_path, report, quiet):
+    """``-o dance.mp4``: the dance rendered with the song, in one step."""
     from .export.video import render_video
 
     progress = Progress(enabled=not quiet and sys.stderr.isatty())
