@@ -20,7 +20,7 @@ from .types import DEFAULT_FPS, MAX_SONG_S, SEGMENT_S
 
 def _setup_env() -> None:
     # librosa JIT-compiles with numba; a persistent cache saves seconds on every later run.
-    from .motion.database import cache_dir
+    from .io.files import cache_dir
 
     os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_dir() / "numba"))
     stop_cleanly_on_sigterm()

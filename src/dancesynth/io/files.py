@@ -96,3 +96,11 @@ def jsonable(x):
     if hasattr(x, "__dataclass_fields__"):
         return jsonable(dataclasses.asdict(x))
     return str(x)
+
+
+def cache_dir() -> Path:
+    """Where built graphs and databases are cached (``$DANCESYNTH_CACHE`` or the user cache).
+    Here, in a light module, so the command line finds it without loading the motion analysis."""
+    root = os.environ.get("DANCESYNTH_CACHE") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "dancesynth")
+    return Path(root)

@@ -27,7 +27,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from ..errors import InputError, ModelError
-from ..io.files import atomic_folder
+from ..io.files import atomic_folder, cache_dir  # noqa: F401  (cache_dir: also imported from here)
 from ..kinematics import fk
 from ..timebase import bpm_from_intervals
 from ..types import MotionClip, Skeleton
@@ -460,15 +460,6 @@ def load_database(folder: Path) -> MotionDatabase:
 
 # ---------------------------------------------------------------------------------------------
 # Finding a database
-
-
-def cache_dir() -> Path:
-    """Where built graphs and databases are cached (``$DANCESYNTH_CACHE`` or the user cache)."""
-    import os
-
-    root = os.environ.get("DANCESYNTH_CACHE") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "dancesynth")
-    return Path(root)
 
 
 def open_database(path: Path | None = None, config: AnalysisConfig = AnalysisConfig(), *,
