@@ -180,3 +180,23 @@ def test_characters_lists_the_builtins():
     for name in LAYOUTS:
         assert name in (r.stdout + r.stderr)
     assert "(default)" in (r.stdout + r.stderr) and ".vrm" in (r.stdout + r.stderr)
+
+
+def test_fingers_follow_the_source_when_both_rigs_have_them(dances):
+    """Daz's two-joint fingers drive a Character Creator rig's three-joint fingers; a rig without
+    fingers (the mannequin's mitten hands) simply has none to move."""
+    if not CC_RIG.is_file():
+        pytest.skip(f"{CC_RIG} (shared mocap data) is not on this machine")
+    src = dances["salsa-120-150bpm"]
+    ch = load_character(CC_RIG)
+    out = retarget(src, ch)
+    sb = find_bones(src.skeleton)
+    _, ps = clip_fk(src)
+    _, pt = clip_fk(out)
+    for finger in ("leftIndex", "rightMiddle", "leftThumb"):
+        a, b = ("Metacarpal", "Proximal") if finger.endswith("Thumb") else ("Proximal", "Intermediate")
+        want = ps[:, sb[finger + b]] - ps[:, sb[finger + a]]
+        got = pt[:, ch.bones[finger + b]] - pt[:, ch.bones[finger + a]]
+        cos = np.sum(want * got, -1) / np.linalg.norm(want, axis=-1) / np.linalg.norm(got, axis=-1)
+        assert np.degrees(np.arccos(np.clip(cos, -1, 1))).max() < 1.0, finger
+    assert not any("Index" in b for b in builtin_character("mannequin").bones)

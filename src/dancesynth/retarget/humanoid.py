@@ -23,7 +23,13 @@ from ..types import Skeleton
 
 SIDES = ("left", "right")
 LIMB_BONES = ("Shoulder", "UpperArm", "LowerArm", "Hand", "UpperLeg", "LowerLeg", "Foot", "Toes")
-BONES = ("hips", "spine", "chest", "upperChest", "neck", "head") + tuple(s + b for s in SIDES for b in LIMB_BONES)
+# Fingers, VRM's names: the thumb's three bones start at its metacarpal, the others' at the proximal.
+FINGERS = {"Thumb": ("thumb",), "Index": ("index",), "Middle": ("middle", "mid"), "Ring": ("ring",),
+           "Little": ("little", "pinky")}
+FINGER_BONES = {f: (("Metacarpal", "Proximal", "Distal") if f == "Thumb" else ("Proximal", "Intermediate", "Distal"))
+                for f in FINGERS}
+BONES = ("hips", "spine", "chest", "upperChest", "neck", "head") + tuple(s + b for s in SIDES for b in LIMB_BONES) \
+    + tuple(s + f + p for s in SIDES for f, parts in FINGER_BONES.items() for p in parts)
 REQUIRED = ("hips", "spine", "head") + tuple(
     s + b for s in SIDES for b in ("UpperArm", "LowerArm", "Hand", "UpperLeg", "LowerLeg", "Foot"))
 
@@ -36,6 +42,8 @@ for _s in SIDES:
     SEGMENT_END.update({_s + "Shoulder": (_s + "UpperArm",), _s + "UpperArm": (_s + "LowerArm",),
                         _s + "LowerArm": (_s + "Hand",), _s + "UpperLeg": (_s + "LowerLeg",),
                         _s + "LowerLeg": (_s + "Foot",), _s + "Foot": (_s + "Toes",)})
+    for _f, _parts in FINGER_BONES.items():
+        SEGMENT_END.update({_s + _f + a: (_s + _f + b,) for a, b in zip(_parts, _parts[1:])})
 
 _SKIP = ("twist", "roll", "share")   # helper joints inside a limb chain that carry no bone
 _VROID = re.compile(r"^j_(?:bip|adj|sec)_([clr])_(.*)$", re.IGNORECASE)
@@ -107,6 +115,9 @@ def find_bones(skeleton: Skeleton, overrides: dict[str, str] | None = None, *, w
     if head >= 0 and "hips" in bones and _is_ancestor(parents, bones["hips"], head):
         _spine(parents, bones, head)
 
+    for s, side in zip("lr", SIDES):
+        if side + "Hand" in bones:
+            bones.update(_fingers(skeleton, parsed, bones[side + "Hand"], side))
     for bone, joint in overrides.items():
         bones[bone] = skeleton.index(joint)
     missing = [b for b in REQUIRED if b not in bones]
@@ -117,6 +128,27 @@ def find_bones(skeleton: Skeleton, overrides: dict[str, str] | None = None, *, w
             f"{', '.join(skeleton.names[:12])}{', ...' if skeleton.n_joints > 12 else ''}); name them in a TOML "
             f"file given with --bone-map, e.g.: [bones] {table.replace(chr(10), ' ')}")
     return bones
+
+
+def _fingers(skeleton: Skeleton, parsed, hand: int, side: str) -> dict[str, int]:
+    """The finger bones below ``hand``: each finger's topmost joint named for it (``lIndex1``,
+    ``CC_Base_L_Mid1``, ``LeftHandIndex1``), then down its chain, one bone per joint."""
+    out = {}
+    below = [j for j in range(hand + 1, skeleton.n_joints) if _is_ancestor(skeleton.parents, hand, j)]
+    for finger, words in FINGERS.items():
+        named = [j for j in below if any(w in parsed[j][1] for w in words)
+                 and not any(x in parsed[j][1] for x in _SKIP)]
+        tops = [j for j in named if skeleton.parents[j] not in named]
+        if len(tops) != 1:      # no such finger, or two candidates: leave the finger at rest
+            continue
+        j = tops[0]
+        for part in FINGER_BONES[finger]:
+            out[side + finger + part] = j
+            kids = [int(k) for k in skeleton.children(j) if int(k) in named]
+            if not kids:
+                break
+            j = kids[0]
+    return out
 
 
 def _check_overrides(skeleton: Skeleton, overrides: dict, what: str) -> None:

@@ -182,7 +182,11 @@ def rig_skeleton(name: str) -> tuple[Skeleton, dict[str, int]]:
             bones[spec] = i
     end_sites = {i: _leaf_tip(spec) for i, (_, _, spec) in enumerate(rows) if not np.any(parents == i)}
     channels = tuple(ROOT_CHANNELS if p < 0 else JOINT_CHANNELS for p in parents)
-    return Skeleton(tuple(names), parents, offsets, channels, end_sites), bones
+    skeleton = Skeleton(tuple(names), parents, offsets, channels, end_sites)
+    # Finger joints (CMU's LThumb, LeftHandIndex1) are named for their finger: found as in any rig.
+    from .humanoid import find_bones
+
+    return skeleton, {**find_bones(skeleton), **bones}
 
 
 def _depth_first(rows):

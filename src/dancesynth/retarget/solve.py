@@ -26,9 +26,11 @@ from .. import rotations as rot
 from ..kinematics import _rotation_between, _unit, fk
 from ..types import MotionClip
 from .character import Character
-from .humanoid import SIDES, find_bones, leg_length, mapped_pairs, segment_ends
+from .humanoid import FINGER_BONES, SIDES, find_bones, leg_length, mapped_pairs, segment_ends
 
 UP = np.array([0.0, 1.0, 0.0])
+_FINGER_PREVIOUS = {s + f + b: s + f + a for s in SIDES for f, parts in FINGER_BONES.items()
+                    for a, b in zip(parts, parts[1:])}
 MIN_SEGMENT_M = 0.01      # shorter bone segments have no reliable direction
 GROUND_PERCENTILE = 1.0
 REACH = 0.998             # IK targets are kept this far inside a leg's full length, where knees still bend ...
@@ -115,6 +117,8 @@ def _rest_alignment(pairs, ends, src_bones, tgt_bones, p_src_rest, p_tgt_rest) -
             continue
         if bone == "head":
             above = [b for b in ("neck", "upperChest", "chest", "spine") if b in align]
+        elif bone in _FINGER_PREVIOUS:      # a fingertip bone turns as the bone before it
+            above = [_FINGER_PREVIOUS[bone]]
         else:
             part = next(k for k in hangs_from if bone.endswith(k)) if bone.endswith(tuple(hangs_from)) else None
             above = [bone[:-len(part)] + hangs_from[part]] if part else []
