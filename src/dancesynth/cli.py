@@ -11,7 +11,7 @@ from pathlib import Path
 
 import click
 
-from .cli_character import characters, dance_character, write_on_character
+from .cli_character import character_options, characters, dance_character, write_on_character
 from .cli_live import render, serve, stream
 from .cli_support import Progress, writable, write_json
 from .errors import DanceSynthError, InputError
@@ -49,12 +49,7 @@ def cli():
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
               help="File to write, by extension: .bvh, .glb (glTF, skinned character), .vrma (VRM Animation), "
                    ".fbx (needs Blender), .mp4 (video with the song). Default: the song's name with .bvh, here.")
-@click.option("--character", default=None, metavar="NAME|FILE",
-              help="Who dances: a built-in (see 'dancesynth characters'; default mannequin) or your rig/model as "
-                   ".bvh, .glb, .gltf or .vrm; 'source' keeps the skeleton the style was captured on.")
-@click.option("--bone-map", type=click.Path(dir_okay=False, path_type=Path),
-              help="TOML file naming your character's humanoid bones ([bones] hips = \"pelvis\", ...) where "
-                   "the automatic mapping cannot.")
+@character_options
 @click.option("--style", help="Style or genre to dance (see 'dancesynth styles'); default: best tempo match.")
 @click.option("--engine", type=click.Choice(["streaming", "global", "neural", "choreography"]), default=None,
               help="streaming (default): segment by segment as music arrives (Xu et al.); global: whole-song DP "
@@ -405,10 +400,7 @@ def train(style, config_name, device, minutes, out_dir, seed, database, quiet):
 @click.argument("song", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
               help="File to write, as for 'dance': .bvh, .glb, .vrma, .fbx or .mp4 (default: SONG.bvh).")
-@click.option("--character", default=None, metavar="NAME|FILE",
-              help="Who conducts, as for 'dance' (default mannequin; 'source': the database's skeleton).")
-@click.option("--bone-map", type=click.Path(dir_okay=False, path_type=Path),
-              help="TOML file naming your character's humanoid bones (as for 'dance').")
+@character_options
 @click.option("--melody-track", type=int, help="MIDI part that carries the melody (see --list-tracks).")
 @click.option("--rhythm-track", type=int, help="MIDI part that gives the beats (default: drums, else the bass).")
 @click.option("--style", help="A look: default, e1, e2, calm, lively.")

@@ -4,11 +4,24 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import click
 
 from .cli_support import Progress, write_json
 from .errors import InputError
+
+
+def character_options(command):
+    """``--character`` and ``--bone-map``, the same on every command that writes or draws a dance."""
+    command = click.option(
+        "--bone-map", type=click.Path(dir_okay=False, path_type=Path),
+        help="TOML file naming your character's humanoid bones ([bones] hips = \"pelvis\", ...) where the "
+             "automatic mapping cannot.")(command)
+    return click.option(
+        "--character", default=None, metavar="NAME|FILE",
+        help="Who dances: a built-in (see 'dancesynth characters'; default mannequin) or your rig/model as "
+             ".bvh, .glb, .gltf or .vrm; 'source' keeps the skeleton the motion was made on.")(command)
 
 
 def dance_character(spec, bone_map, suffix):

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from .cli_character import character_options
 from .cli_support import Progress, bvh_output
 from .errors import InputError
 from .types import DEFAULT_FPS, SEGMENT_S
@@ -24,10 +25,7 @@ from .types import DEFAULT_FPS, SEGMENT_S
               help="A database folder or a folder of BVH files (default: the bundled database).")
 @click.option("--follow-signature", is_flag=True, help="Also keep the genre's motif signature as the dance goes.")
 @click.option("--fast", is_flag=True, help="Read a file as fast as it decodes instead of at real-time pace.")
-@click.option("--character", default=None, metavar="NAME|FILE",
-              help="Who dances (as for 'dance'; default mannequin; 'source': the style's own skeleton).")
-@click.option("--bone-map", type=click.Path(dir_okay=False, path_type=Path),
-              help="TOML file naming your character's humanoid bones (as for 'dance').")
+@character_options
 @click.option("-q", "--quiet", is_flag=True, help="Only the summary, no line per segment.")
 def stream(source, output, segment_seconds, style, fps, seed, database, follow_signature, fast, character, bone_map,
            quiet):
@@ -84,10 +82,7 @@ def stream(source, output, segment_seconds, style, fps, seed, database, follow_s
 @click.option("--width", type=int, default=960, show_default=True)
 @click.option("--height", type=int, default=540, show_default=True)
 @click.option("--fps", type=float, default=None, help="Video frame rate (default: the dance's).")
-@click.option("--character", default=None, metavar="NAME|FILE",
-              help="Who dances in the video: a built-in or your .glb/.gltf/.vrm/.bvh (default: the mannequin).")
-@click.option("--bone-map", type=click.Path(dir_okay=False, path_type=Path),
-              help="TOML file naming your character's humanoid bones (as for 'dance').")
+@character_options
 @click.option("--figure", type=click.Choice(["character", "stick"]), default="character", show_default=True,
               help="Draw the character's skinned mesh, or a stick figure of the dance's own skeleton.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
