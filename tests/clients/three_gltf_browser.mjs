@@ -14,7 +14,7 @@ import { createServer } from 'node:http';
 import { readFile } from 'node:fs/promises';
 import { extname, join, normalize } from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { chromium } from 'playwright-core';
+import { launchChromium } from './headless.mjs';
 
 const [file, outDir, shotsArg, executablePath = '/usr/bin/chromium'] = process.argv.slice(2);
 const here = fileURLToPath(new URL('.', import.meta.url));
@@ -115,13 +115,7 @@ await new Promise((resolve) => server.listen(0, '127.0.0.1', resolve));
 
 let browser;
 try {
-	browser = await chromium.launch({
-		executablePath,
-		headless: true,
-		timeout: 30000,
-		args: ['--no-sandbox', '--disable-gpu', '--enable-unsafe-swiftshader', '--disable-background-networking',
-			'--disable-component-update', '--disable-sync'],
-	});
+	browser = await launchChromium(executablePath);
 	const page = await browser.newPage({ viewport: { width: 640, height: 480 } });
 	page.setDefaultTimeout(30000);
 	page.on('pageerror', (e) => report.errors.push(`pageerror: ${e.message}`));

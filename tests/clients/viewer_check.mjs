@@ -14,7 +14,7 @@
 // Writes OUT_DIR/a.png, OUT_DIR/b.png and OUT_DIR/page.png (the whole page) and prints one JSON
 // object on stdout (timings, the music clock and status line at each shot, page errors); every
 // wait is bounded.
-import { chromium } from 'playwright-core';
+import { launchChromium } from './headless.mjs';
 
 const [url, outDir, mode, value, executablePath = '/usr/bin/chromium', optionsJSON = '{}'] = process.argv.slice(2);
 const options = JSON.parse(optionsJSON);
@@ -24,14 +24,7 @@ const since = () => Date.now() - t0;
 
 let browser;
 try {
-	browser = await chromium.launch({
-		executablePath,
-		headless: true,
-		timeout: 30000,
-		args: ['--no-sandbox', '--disable-gpu', '--enable-unsafe-swiftshader', '--disable-background-networking',
-			'--disable-component-update', '--disable-sync', '--autoplay-policy=no-user-gesture-required',
-			'--mute-audio'],
-	});
+	browser = await launchChromium(executablePath, ['--autoplay-policy=no-user-gesture-required', '--mute-audio']);
 	report.timings.browser_ms = since();
 	const page = await browser.newPage({ viewport: { width: 1000, height: 700 }, acceptDownloads: true });
 	page.setDefaultTimeout(20000);

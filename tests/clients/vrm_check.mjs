@@ -12,7 +12,7 @@
 import { readFile } from 'node:fs/promises';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { chromium } from 'playwright-core';
+import { launchChromium } from './headless.mjs';
 
 const [outDir, animation, timesArg, avatarsArg, executablePath = '/usr/bin/chromium'] = process.argv.slice(2);
 const times = timesArg.split(',').map(Number);
@@ -86,11 +86,7 @@ const TYPES = { '.js': 'text/javascript', '.mjs': 'text/javascript', '.json': 'a
 
 let browser;
 try {
-  browser = await chromium.launch({
-    executablePath, headless: true, timeout: 30000,
-    args: ['--no-sandbox', '--disable-gpu', '--enable-unsafe-swiftshader', '--disable-background-networking',
-      '--disable-component-update', '--disable-sync'],
-  });
+  browser = await launchChromium(executablePath);
   const page = await browser.newPage({ viewport: { width: 360, height: 480 } });
   page.setDefaultTimeout(30000);
   page.on('pageerror', (e) => report.errors.push(`pageerror: ${e.message}`));
