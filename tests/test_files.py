@@ -43,7 +43,7 @@ def test_sigterm_during_a_write_leaves_nothing_behind(tmp_path):
 
     script = (
         "import sys, time\n"
-        "from dancesynth.cli import stop_cleanly_on_sigterm\n"
+        "from dancesynth.io.files import stop_cleanly_on_sigterm\n"
         "from dancesynth.io.files import atomic_output\n"
         "stop_cleanly_on_sigterm()\n"
         "with atomic_output(sys.argv[1]) as fh:\n"

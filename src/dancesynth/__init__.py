@@ -12,7 +12,7 @@ from .errors import DanceSynthError, InputError, ModelError, SynthesisError
 
 __version__ = "0.1.0"
 
-__all__ = ["dance", "list_styles", "read_bvh", "write_bvh", "analyze_music", "open_database",
+__all__ = ["dance", "batch", "list_styles", "read_bvh", "write_bvh", "analyze_music", "open_database",
            "MotionClip", "MusicFeatures", "Skeleton",
            "DanceSynthError", "InputError", "ModelError", "SynthesisError"]
 
@@ -21,7 +21,13 @@ def __getattr__(name):
     if name in ("MotionClip", "MusicFeatures", "Skeleton"):
         from . import types
         return getattr(types, name)
-    if name in ("dance", "list_styles", "DanceConfig"):
+    if name in ("batch", "BatchResult"):
+        from . import batching
+        return getattr(batching, name)
+    if name == "list_styles":
+        from .motion.catalog import list_styles
+        return list_styles
+    if name in ("dance", "DanceConfig"):
         from . import api
         return getattr(api, name)
     if name in ("read_bvh", "write_bvh"):

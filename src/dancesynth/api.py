@@ -14,6 +14,7 @@ from .engines.graph.cache import load_graph
 from .engines.graph.engine import EngineConfig, GraphEngine, MusicSegment, SegmentFrames
 from .engines.graph.meta_graph import GraphConfig
 from .errors import InputError
+from .motion.catalog import list_styles  # noqa: F401  (part of this module's API)
 from .motion.database import MotionDatabase, open_database
 from .provenance import EngineRun, make_provenance
 from .types import (DEFAULT_FPS, FALLBACK_BPM, MAX_SONG_S, SEGMENT_S, MotionClip, MusicFeatures, check_fps,
@@ -306,15 +307,6 @@ def _graph_dance_fit(fit: StyleFit, music: MusicFeatures, db: MotionDatabase, co
                     source_frames=np.concatenate([s.source_pos for s in segments]), motifs=motifs,
                     fit=fit_summary(fit, music, warp_rates), extra=extra)
     return MotionClip(style.skeleton, config.fps, root, local, contacts=contacts), run
-
-
-def list_styles(database: MotionDatabase | str | Path | None = None) -> list[dict]:
-    """The styles of a database: name, genre, tempo range, clips, minutes, skeleton."""
-    db = database if isinstance(database, MotionDatabase) else open_database(database)
-    return [{"name": s.name, "genre": s.genre, "tempo_min_bpm": s.tempo_range_bpm[0],
-             "tempo_max_bpm": s.tempo_range_bpm[1], "clips": s.n_clips, "minutes": s.duration_s / 60.0,
-             "beats": len(s.beat_frames), "joints": s.skeleton.n_joints, "fps": s.fps}
-            for s in sorted(db.styles.values(), key=lambda s: s.name)]
 
 
 def conduct(song, *, config=None, melody_track: int | None = None, rhythm_track: int | None = None,

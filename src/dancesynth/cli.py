@@ -6,36 +6,27 @@ import errno
 import os
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import click
 
-from .cli_character import character_options, characters, dance_character, write_on_character
+from .cli_batch import batch
+from .cli_character import character_options, characters, write_on_character
+from .cli_dance import dance_config, dance_options
 from .cli_live import render, serve, stream
 from .cli_support import Progress, writable, write_json
+from .defaults import DEFAULT_FPS
 from .errors import DanceSynthError, InputError
-from .types import DEFAULT_FPS, MAX_SONG_S, SEGMENT_S
 
 
 def _setup_env() -> None:
     # librosa JIT-compiles with numba; a persistent cache saves seconds on every later run.
-    from .io.files import cache_dir
+    from .io.files import cache_dir, stop_cleanly_on_sigterm
+    from .threads import limit_threads
 
     os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_dir() / "numba"))
+    limit_threads()  # before numpy loads: torch and BLAS at DANCESYNTH_THREADS (1) threads
     stop_cleanly_on_sigterm()
-
-
-def stop_cleanly_on_sigterm() -> None:
-    """SIGTERM (``kill``, a service manager, a container stopping) ends the process as an exception
-    would, so half-written outputs are removed on the way out (by default it kills outright and
-    leaves a hidden ``.part`` file behind). The exit code is the usual 128 + 15."""
-    import signal
-
-    def terminate(signum, frame):
-        raise SystemExit(128 + signum)
-
-    signal.signal(signal.SIGTERM, terminate)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -50,59 +41,20 @@ def cli():
               help="File to write, by extension: .bvh, .glb (glTF, skinned character), .vrma (VRM Animation), "
                    ".fbx (needs Blender), .mp4 (video with the song). Default: the song's name with .bvh, here.")
 @character_options
-@click.option("--style", help="Style or genre to dance (see 'dancesynth styles'); default: best tempo match.")
-@click.option("--engine", type=click.Choice(["streaming", "global", "neural", "choreography"]), default=None,
-              help="streaming (default): segment by segment as music arrives (Xu et al.); global: whole-song DP "
-                   "baseline; choreography: motifs by eq. (5) danced with mocap words (Aristidou et al.).")
-@click.option("--recreate", type=click.Path(dir_okay=False, path_type=Path),
-              help="Re-create this BVH dance's motif sequence on SONG (implies --engine choreography).")
-@click.option("--motif-at", "motif_at", multiple=True, metavar="SECONDS=MOTIF",
-              help="Dance MOTIF (e.g. M17) on the beat at SECONDS; repeatable (implies --engine choreography).")
-@click.option("--follow-signature", is_flag=True,
-              help="Streaming engine: also keep the genre's motif signature (Aristidou et al.'s global structure).")
-@click.option("--segment-seconds", type=float, default=SEGMENT_S, show_default=True, help="Streaming segment length.")
-@click.option("--lookahead", "lookahead", type=float, default=0.0, show_default=True, metavar="SECONDS",
-              help="Streaming: choose each segment seeing this much of the music after it; the dance follows the "
-                   "music's loudness more closely, its feet slide a little more (docs/accents.md).")
-@click.option("--fps", type=float, default=DEFAULT_FPS, show_default=True, help="Frame rate of the output.")
-@click.option("--seed", type=int, default=None,
-              help="Vary the dance between runs (default: deterministic).")
-@click.option("--database", type=click.Path(file_okay=False, path_type=Path),
-              help="A database folder or a folder of BVH files (default: the bundled database).")
-@click.option("--max-minutes", type=float, default=MAX_SONG_S / 60, show_default=True, help="Refuse longer songs.")
-@click.option("--ths", type=float, default=None, help="Eq. (1) threshold for transitions (default 3.0).")
-@click.option("--thr", type=float, default=None, help="Eq. (2) floor of a transition's weight, > 1 (default 1.5).")
-@click.option("--paper", is_flag=True,
-              help="Xu et al.'s graph and objective as printed: no repeat penalty, jump cost, jump limits or "
-                   "accent costs, literal eq. (1). Still on: style and level choice, glitch skipping, blends "
-                   "and foot lock (README: 'Where we depart from or add to the paper').")
+@dance_options
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Also write a JSON report (beats, transitions, time warps) for 'dancesynth eval --report'.")
 @click.option("-q", "--quiet", is_flag=True, help="No summary and no progress bar.")
-def dance(song, output, character, bone_map, style, engine, recreate, motif_at, follow_signature, segment_seconds,
-          lookahead, fps, seed, database, max_minutes, ths, thr, paper, report_path, quiet):
+def dance(song, output, character, bone_map, database, report_path, quiet, **options):
     """Make a beat-synchronised dance for SONG (wav, ogg, flac, mp3, ...) and write it for your character."""
-    from .api import DanceConfig, dance as make_dance
-    from .export.formats import check_format
+    from .api import dance as make_dance
+    from .export.formats import check_format, output_character
 
     output = output or Path(song.stem + ".bvh")
     suffix = check_format(output)
     writable(output, report_path)
-    target = dance_character(character, bone_map, suffix)
-    config = DanceConfig(style=style, engine=engine, segment_s=segment_seconds, lookahead_s=lookahead, fps=fps,
-                         seed=seed, max_duration_s=max_minutes * 60.0, motif_at=motif_at, recreate=recreate,
-                         follow_signature=follow_signature)
-    from .engines.graph.engine import EngineConfig
-    from .engines.graph.meta_graph import GraphConfig
-
-    if paper:
-        config = replace(config, graph=GraphConfig.paper(), render=EngineConfig.paper())
-    if ths is not None or thr is not None:
-        try:
-            graph = replace(config.graph, **{k: v for k, v in (("ths", ths), ("thr", thr)) if v is not None})
-        except InputError as exc:
-            raise InputError(f"{exc}: check --ths and --thr") from None
-        config = replace(config, graph=graph)
+    target = output_character(character, bone_map, suffix)
+    config = dance_config(**options)
     progress = Progress(enabled=not quiet and sys.stderr.isatty())
     t0 = time.perf_counter()
     try:
@@ -163,7 +115,7 @@ def dance(song, output, character, bone_map, style, engine, recreate, motif_at, 
               help="A database folder or a folder of BVH files (default: the bundled database).")
 def styles(database):
     """List the styles of a dance database with their tempo ranges and sizes."""
-    from .api import list_styles
+    from .motion.catalog import list_styles
 
     rows = list_styles(database)
     ws = max(len("style"), *(len(r["name"]) for r in rows)) + 2
@@ -416,14 +368,14 @@ def conduct(song, output, character, bone_map, melody_track, rhythm_track, style
     from .api import conduct as make_motion
     from .engines.procedural import make_config
     from .engines.procedural.report import parts_lines, summary_lines
-    from .export.formats import check_format
+    from .export.formats import check_format, output_character
 
     if list_tracks:
         return click.echo("\n".join(parts_lines(song)))
     output = output or Path(song.stem + ".bvh")
     suffix = check_format(output)
     writable(output)
-    target = dance_character(character, bone_map, suffix)
+    target = output_character(character, bone_map, suffix)
     cfg = make_config(style=style, config_path=config_path, params=params, fps=fps)
     clip = make_motion(song, config=cfg, melody_track=melody_track, rhythm_track=rhythm_track)
     write_on_character(clip, target, output, song=song, quiet=quiet)
@@ -431,14 +383,16 @@ def conduct(song, output, character, bone_map, melody_track, rhythm_track, style
         click.echo("\n".join(summary_lines(clip.provenance.summary, output)))
 
 
-for _command in (stream, render, serve, characters):  # in cli_live.py and cli_character.py
+for _command in (stream, render, serve, characters, batch):  # in cli_live.py, cli_character.py, cli_batch.py
     cli.add_command(_command)
 
 
 def main(argv=None) -> int:
     try:
         _setup_env()
-        cli.main(args=argv, prog_name="dancesynth", standalone_mode=False)
+        code = cli.main(args=argv, prog_name="dancesynth", standalone_mode=False)
+        if isinstance(code, int) and not isinstance(code, bool):  # click.exceptions.Exit(code), e.g. batch's
+            return code
     except click.exceptions.Abort:
         click.echo("interrupted", err=True)
         return 130

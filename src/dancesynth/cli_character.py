@@ -9,7 +9,6 @@ from pathlib import Path
 import click
 
 from .cli_support import Progress, write_json
-from .errors import InputError
 
 
 def character_options(command):
@@ -24,66 +23,31 @@ def character_options(command):
              ".bvh, .glb, .gltf or .vrm; 'source' keeps the skeleton the motion was made on.")(command)
 
 
-def dance_character(spec, bone_map, suffix):
-    """The character to dance (None: the source skeleton), checked before any work (a missing Blender, too)."""
-    from .retarget import SOURCE
-    from .retarget.character import DEFAULT_CHARACTER, load_character
-
-    if suffix == ".fbx":
-        from .export.fbx import find_blender
-
-        find_blender()
-    spec = spec or DEFAULT_CHARACTER
-    if spec == SOURCE:
-        if bone_map is not None:
-            raise InputError("--bone-map names the bones of your own --character; it does not apply to 'source'")
-        if suffix == ".vrma":
-            raise InputError("a .vrma is made on a humanoid rig: leave out --character source")
-        return None
-    return load_character(spec, bone_map=bone_map)
-
-
 def on_dance_character(clip, target):
-    """``(clip on the character, the Character)`` for ``dance_character``'s choice."""
+    """``(clip on the character, the Character)`` for ``export.formats.output_character``'s choice."""
     from .retarget import SOURCE, on_character
 
     return on_character(clip, SOURCE if target is None else target)
 
 
 def write_on_character(clip, target, output, *, song, report_path=None, report=None, quiet=False):
-    """Write ``clip`` put on ``target`` (``dance_character``'s choice) in ``output``'s format, with the
+    """Write ``clip`` put on ``target`` (``export.formats.output_character``'s choice) in ``output``'s format, with the
     report if asked: both or neither. Returns ``(the clip on the character, the Character)``."""
-    from .export.formats import encode_dance
-    from .io.files import atomic_output
+    from .export.formats import write_dance
 
     moved, target = on_dance_character(clip, target)
-    if output.suffix.lower() == ".mp4":
-        _video(moved, target, song, output, report_path, report, quiet)
-        return moved, target
-    data = encode_dance(output.suffix.lower(), moved, target)
-    with atomic_output(output, "wb") as fh:
-        fh.write(data)
-        if report is not None:
-            write_json(report_path, report)
-    return moved, target
-
-
-def _video(clip, character, song, output, report_path, report, quiet):
-    """``-o dance.mp4``: the dance rendered with the song, in one step."""
-    from .export.video import render_video
-
-    progress = Progress(enabled=not quiet and sys.stderr.isatty())
+    progress = Progress(enabled=not quiet and sys.stderr.isatty() and output.suffix.lower() == ".mp4")
     try:
-        render_video(clip, song, output, character=character,
-                     progress=lambda done, total: progress("render", done, total))
+        write_dance(output, moved, target, song=song, progress=lambda done, total: progress("render", done, total))
     finally:
         progress.close()
     if report is not None:
-        try:   # the video and the report both or neither
+        try:   # the dance and the report both or neither
             write_json(report_path, report)
         except BaseException:
             output.unlink(missing_ok=True)
             raise
+    return moved, target
 
 
 @click.command()

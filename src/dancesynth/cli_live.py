@@ -10,7 +10,7 @@ import click
 from .cli_character import character_options
 from .cli_support import Progress, bvh_output
 from .errors import InputError
-from .types import DEFAULT_FPS, SEGMENT_S
+from .defaults import DEFAULT_FPS, SEGMENT_S
 
 
 @click.command()

@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 from .errors import InputError
+from .io.files import write_json  # noqa: F401  (the CLI modules import it from here)
 
 
 class Progress:
@@ -44,13 +45,3 @@ def writable(*paths: Path | None) -> None:
     for out in paths:
         if out is not None and not out.parent.is_dir():
             raise InputError(f"cannot write {out}: folder {out.parent} does not exist")
-
-
-def write_json(path: Path, data) -> None:
-    import json
-
-    from .io.files import atomic_output
-
-    with atomic_output(path) as fh:
-        json.dump(data, fh, indent=1, allow_nan=False)
-        fh.write("\n")

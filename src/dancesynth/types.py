@@ -18,11 +18,7 @@ from .errors import InputError
 ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
 MAX_SEED = 2**63 - 1
 
-# Product-wide defaults, each defined here once; the configs and the CLI read them from here.
-DEFAULT_FPS = 30.0          # frame rate of a dance
-SEGMENT_S = 5.0             # streaming segment length (Xu et al. synthesise segment by segment)
-FALLBACK_BPM = 100.0        # the tempo we dance at when the music has no clear beat
-MAX_SONG_S = 15 * 60.0      # longer songs are refused unless the user raises the limit
+from .defaults import DEFAULT_FPS, FALLBACK_BPM, MAX_SONG_S, SEGMENT_S  # noqa: F401  (read from here too)
 
 
 def check_seed(seed) -> None:

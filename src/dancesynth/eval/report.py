@@ -8,6 +8,7 @@ with, and runs the pure ``evaluate`` on each motion.
 from __future__ import annotations
 
 import json
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -36,10 +37,11 @@ def load_dance_report(path: Path) -> dict:
 
 
 def _pick_mocap(dance: MotionClip, music: MusicFeatures, style: str | None, report: dict | None, database):
-    """The source mocap to compare with: ``style``, else the report's, else the best match of skeleton and tempo."""
-    from ..motion.database import open_database
+    """The source mocap to compare with: ``style``, else the report's, else the best match of skeleton and
+    tempo; ``None`` when no style has the dance's skeleton."""
+    from ..motion.database import MotionDatabase, open_database
 
-    db = open_database(database)
+    db = database if isinstance(database, MotionDatabase) else open_database(database)
     name = style or (report or {}).get("style")
     if name:
         candidates = db.styles_of(name)  # raises InputError naming the choices
@@ -47,10 +49,15 @@ def _pick_mocap(dance: MotionClip, music: MusicFeatures, style: str | None, repo
         joints = set(dance.skeleton.names)
         candidates = [s for s in db.styles.values() if set(s.skeleton.names) == joints]
         if not candidates:
-            return None, None
+            return None
     tempo = music.tempo_bpm if music.tempo_bpm > 0 else FALLBACK_BPM
-    best = min(candidates, key=lambda s: abs(np.log2(np.median(s.clip_tempo_bpm) / tempo)))
-    return best.name, [best.clip(i) for i in range(best.n_clips)]
+    return min(candidates, key=lambda s: abs(np.log2(np.median(s.clip_tempo_bpm) / tempo)))
+
+
+@lru_cache(maxsize=8)
+def _style_reference(style, fps: float):
+    """A style's mocap statistics (once per style and frame rate: a batch evaluates many dances)."""
+    return mocap_reference([style.clip(i) for i in range(style.n_clips)], fps)
 
 
 def evaluate_files(dance_path: Path, song_path: Path, *, reference_path: Path | None = None,
@@ -63,8 +70,6 @@ def evaluate_files(dance_path: Path, song_path: Path, *, reference_path: Path | 
     ``dancesynth.eval.evaluate``; transition and time-warp metrics need the dance's
     report (``dance --report``), the mocap comparisons a style of the database.
     """
-    from dataclasses import asdict
-
     from ..io.bvh import read_bvh
     from ..music import analyze_music
 
@@ -72,25 +77,38 @@ def evaluate_files(dance_path: Path, song_path: Path, *, reference_path: Path | 
     music = analyze_music(path=song_path)
     _check_durations(dance, music, dance_path, song_path)
     report = load_dance_report(report_path) if report_path is not None else None
-    mocap_style, clips = _pick_mocap(dance, music, style, report, database)
-    reference_mocap = mocap_reference(clips, dance.fps) if clips else None
+    reference = read_bvh(reference_path) if reference_path is not None else None
+    result = evaluate_dance(dance, music, report=report, style=style, database=database, params=params,
+                            reference=reference)
+    result["song"]["path"] = str(song_path)
+    return result
+
+
+def evaluate_dance(dance: MotionClip, music: MusicFeatures, *, report: dict | None = None, style: str | None = None,
+                   database=None, params: EvalParams = EvalParams(), reference: MotionClip | None = None) -> dict:
+    """``evaluate_files`` for a dance and song already in memory (``report``: ``Provenance.report()``)."""
+    from dataclasses import asdict
+
+    mocap = _pick_mocap(dance, music, style, report, database)
+
+    def reference_of(clip):
+        return None if mocap is None else _style_reference(mocap, clip.fps)
+
     common = dict(music_beats_s=music.beat_times_s, music_loudness_db=music.intensity_db, params=params,
                   beat_in_bar=music.beat_in_bar, beats_per_bar=music.beats_per_bar)
     result = {
         "dance": evaluate(dance, transitions_s=report["transition_times_s"] if report else None,
                           warp_rates=report["warp_rates"] if report else None,
-                          mocap=reference_mocap, **common),
-        "song": {"path": str(song_path), "duration_s": music.duration_s, "tempo_bpm": music.tempo_bpm,
+                          mocap=reference_of(dance), **common),
+        "song": {"path": music.source, "duration_s": music.duration_s, "tempo_bpm": music.tempo_bpm,
                  "beats": len(music.beat_times_s), "beat_confidence": music.beat_confidence,
                  "default_tempo": music.default_tempo, "beats_per_bar": music.beats_per_bar,
                  "metre_confidence": music.meta.get("metre_confidence")},
-        "mocap_style": mocap_style,
+        "mocap_style": None if mocap is None else mocap.name,
         "params": asdict(params),
     }
-    if reference_path is not None:
-        reference = read_bvh(reference_path)
-        mocap = mocap_reference(clips, reference.fps) if clips else None
-        result["reference"] = evaluate(reference, mocap=mocap, **common)
+    if reference is not None:
+        result["reference"] = evaluate(reference, mocap=reference_of(reference), **common)
     return result
 
 

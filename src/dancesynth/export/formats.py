@@ -29,6 +29,45 @@ def check_format(path: Path) -> str:
     return suffix
 
 
+def output_character(spec=None, bone_map=None, suffix: str = ".bvh"):
+    """The character a dance in ``suffix``'s format is written on: a ``Character`` (``spec``: a built-in
+    name or a file; default the mannequin), or ``None`` for ``"source"`` (the skeleton the dance was
+    made on). Checked before any work, a missing Blender for .fbx too."""
+    from ..retarget import SOURCE
+    from ..retarget.character import DEFAULT_CHARACTER, load_character
+
+    if suffix == ".fbx":
+        from .fbx import find_blender
+
+        find_blender()
+    spec = spec or DEFAULT_CHARACTER
+    if str(spec) == SOURCE:
+        if bone_map is not None:
+            raise InputError("--bone-map names the bones of your own --character; it does not apply to 'source'")
+        if suffix == ".vrma":
+            raise InputError("a .vrma is made on a humanoid rig: leave out --character source")
+        return None
+    return load_character(spec, bone_map=bone_map)
+
+
+def write_dance(output: Path, clip, character, *, song: Path | None = None, progress=None) -> None:
+    """Write ``clip`` (on ``character``'s skeleton) to ``output`` in its extension's format: whole or
+    not at all. A video needs the ``song`` for its sound track; ``progress(done, total)`` follows
+    its frames."""
+    output = Path(output)
+    suffix = check_format(output)
+    if suffix == ".mp4":
+        from .video import render_video
+
+        render_video(clip, song, output, character=character, progress=progress)
+        return
+    from ..io.files import atomic_output
+
+    data = encode_dance(suffix, clip, character)
+    with atomic_output(output, "wb") as fh:
+        fh.write(data)
+
+
 def encode_dance(suffix: str, clip, character) -> bytes:
     """``clip`` (on ``character``'s skeleton) as the bytes of a ``suffix`` file (not ``.mp4``)."""
     if suffix == ".bvh":

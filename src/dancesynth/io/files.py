@@ -9,8 +9,6 @@ import shutil
 import tempfile
 from pathlib import Path
 
-import numpy as np
-
 from ..errors import InputError
 
 
@@ -77,8 +75,31 @@ def atomic_folder(path):
         raise
 
 
+def stop_cleanly_on_sigterm() -> None:
+    """SIGTERM (``kill``, a service manager, a container stopping) ends the process as an exception
+    would, so half-written outputs are removed on the way out (by default it kills outright and
+    leaves a hidden ``.part`` file behind). The exit code is the usual 128 + 15."""
+    import signal
+
+    def terminate(signum, frame):
+        raise SystemExit(128 + signum)
+
+    signal.signal(signal.SIGTERM, terminate)
+
+
+def write_json(path, data) -> None:
+    """``data`` as indented JSON at ``path``, whole or not at all (NaN refused: JSON has none)."""
+    import json
+
+    with atomic_output(path) as fh:
+        json.dump(data, fh, indent=1, allow_nan=False)
+        fh.write("\n")
+
+
 def jsonable(x):
     """Plain JSON types: numpy scalars and arrays, paths, tuples, non-finite floats (as null)."""
+    import numpy as np  # here, not at the top: the command line's start-up reads this module
+
     if isinstance(x, dict):
         return {str(k): jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):

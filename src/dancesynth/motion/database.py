@@ -32,12 +32,11 @@ from ..kinematics import fk
 from ..timebase import bpm_from_intervals
 from ..types import MotionClip, Skeleton
 from . import beats as motion_beats
+from .catalog import BUNDLED_DATABASE, FORMAT_VERSION  # noqa: F401  (also imported from here)
 from .features import foot_contacts, foot_points, kinetic_energy
 from .resample import resample_clip_arrays
 from .roles import bone_masses, find_roles
 
-FORMAT_VERSION = 1
-BUNDLED_DATABASE = Path(__file__).resolve().parents[1] / "data" / "database"
 MANIFEST_NAME = "genres.toml"
 MIN_CLIP_S = 0.5  # a clip shorter than this has no 3 beats to find (and may have too few frames to differentiate)
 
@@ -424,9 +423,36 @@ def _save_database(db: MotionDatabase, folder: Path) -> None:
         json.dump(index, fh, indent=1)
 
 
+#: Databases already loaded in this process, by folder and its files' sizes and times: a batch, a
+#: server or a loop of ``dance()`` calls loads each database once (0.2 s and ~100 MB each time).
+_LOADED: dict[tuple, MotionDatabase] = {}
+_MAX_LOADED = 4
+
+
 def load_database(folder: Path) -> MotionDatabase:
-    """Load a database folder written by ``save_database``."""
+    """Load a database folder written by ``save_database`` (once per process while its files are
+    unchanged: the arrays are read-only, shared by every caller)."""
     folder = Path(folder)
+    try:
+        key = (str(folder.resolve()),) + tuple(sorted((p.name, p.stat().st_size, p.stat().st_mtime_ns)
+                                                      for p in folder.iterdir() if p.is_file()))
+    except OSError:
+        key = None  # an unreadable folder: the loader below says what is wrong
+    if key in _LOADED:
+        return _LOADED[key]
+    db = _load_database(folder)
+    for style in db.styles.values():
+        for a in (style.local_rot, style.root_pos, style.contacts, style.energy, style.beat_frames,
+                  style.clip_starts, style.clip_tempo_bpm):
+            a.setflags(write=False)
+    if key is not None:
+        while len(_LOADED) >= _MAX_LOADED:
+            _LOADED.pop(next(iter(_LOADED)))
+        _LOADED[key] = db
+    return db
+
+
+def _load_database(folder: Path) -> MotionDatabase:
     try:
         index = json.loads((folder / "database.json").read_text())
     except FileNotFoundError:

@@ -90,6 +90,9 @@ def generate(model: StoredModel, music: MusicFeatures, grid, motifs: np.ndarray,
     """Run the generator over ``grid`` (a ``BeatGrid``) and return the dance at ``fps``."""
     import torch
 
+    from ...threads import torch_threads
+
+    torch_threads()  # one thread by default: 3.5-5.6x faster than torch's thread per core here
     gen = model.generator
     n = int(np.floor(music.duration_s * TRAIN_FPS)) + int(2 * TRAIN_FPS)   # two seconds to spare for the warp
     k, phase, length_s = beat_phase(n, grid.times_s * TRAIN_FPS, TRAIN_FPS)

@@ -1,0 +1,71 @@
+"""Command line, the options of a dance: the same on ``dance`` and ``batch``, made into a
+``DanceConfig`` in one place."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import click
+
+from .defaults import DEFAULT_FPS, MAX_SONG_S, SEGMENT_S
+from .errors import InputError
+
+_OPTIONS = [
+    click.option("--style", help="Style or genre to dance (see 'dancesynth styles'); default: best tempo match."),
+    click.option("--engine", type=click.Choice(["streaming", "global", "neural", "choreography"]), default=None,
+                 help="streaming (default): segment by segment as music arrives (Xu et al.); global: whole-song "
+                      "DP baseline; choreography: motifs by eq. (5) danced with mocap words (Aristidou et al.)."),
+    click.option("--recreate", type=click.Path(dir_okay=False, path_type=Path),
+                 help="Re-create this BVH dance's motif sequence on SONG (implies --engine choreography)."),
+    click.option("--motif-at", "motif_at", multiple=True, metavar="SECONDS=MOTIF",
+                 help="Dance MOTIF (e.g. M17) on the beat at SECONDS; repeatable (implies --engine choreography)."),
+    click.option("--follow-signature", is_flag=True,
+                 help="Streaming engine: also keep the genre's motif signature (Aristidou et al.'s global "
+                      "structure)."),
+    click.option("--segment-seconds", type=float, default=SEGMENT_S, show_default=True,
+                 help="Streaming segment length."),
+    click.option("--lookahead", "lookahead", type=float, default=0.0, show_default=True, metavar="SECONDS",
+                 help="Streaming: choose each segment seeing this much of the music after it; the dance follows "
+                      "the music's loudness more closely, its feet slide a little more (docs/accents.md)."),
+    click.option("--fps", type=float, default=DEFAULT_FPS, show_default=True, help="Frame rate of the output."),
+    click.option("--seed", type=int, default=None, help="Vary the dance between runs (default: deterministic)."),
+    click.option("--database", type=click.Path(file_okay=False, path_type=Path),
+                 help="A database folder or a folder of BVH files (default: the bundled database)."),
+    click.option("--max-minutes", type=float, default=MAX_SONG_S / 60, show_default=True,
+                 help="Refuse longer songs."),
+    click.option("--ths", type=float, default=None, help="Eq. (1) threshold for transitions (default 3.0)."),
+    click.option("--thr", type=float, default=None, help="Eq. (2) floor of a transition's weight, > 1 (default 1.5)."),
+    click.option("--paper", is_flag=True,
+                 help="Xu et al.'s graph and objective as printed: no repeat penalty, jump cost, jump limits or "
+                      "accent costs, literal eq. (1). Still on: style and level choice, glitch skipping, blends "
+                      "and foot lock (README: 'Where we depart from or add to the paper')."),
+]
+
+def dance_options(command):
+    """Every option that shapes a dance (``--style`` ... ``--paper``, and ``--database``)."""
+    for option in reversed(_OPTIONS):
+        command = option(command)
+    return command
+
+
+def dance_config(*, style, engine, recreate, motif_at, follow_signature, segment_seconds, lookahead, fps, seed,
+                 max_minutes, ths, thr, paper):
+    """The ``DanceConfig`` the options of ``dance_options`` ask for."""
+    from .api import DanceConfig
+
+    config = DanceConfig(style=style, engine=engine, segment_s=segment_seconds, lookahead_s=lookahead, fps=fps,
+                         seed=seed, max_duration_s=max_minutes * 60.0, motif_at=motif_at, recreate=recreate,
+                         follow_signature=follow_signature)
+    from .engines.graph.engine import EngineConfig
+    from .engines.graph.meta_graph import GraphConfig
+
+    if paper:
+        config = replace(config, graph=GraphConfig.paper(), render=EngineConfig.paper())
+    if ths is not None or thr is not None:
+        try:
+            graph = replace(config.graph, **{k: v for k, v in (("ths", ths), ("thr", thr)) if v is not None})
+        except InputError as exc:
+            raise InputError(f"{exc}: check --ths and --thr") from None
+        config = replace(config, graph=graph)
+    return config

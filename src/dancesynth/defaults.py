@@ -1,0 +1,10 @@
+"""Product-wide defaults, each defined here once; the configs and the CLI read them from here
+(a module without numpy, so the command line starts fast)."""
+
+DEFAULT_FPS = 30.0          # frame rate of a dance
+SEGMENT_S = 5.0             # streaming segment length (Xu et al. synthesise segment by segment)
+FALLBACK_BPM = 100.0        # the tempo we dance at when the music has no clear beat
+MAX_SONG_S = 15 * 60.0      # longer songs are refused unless the user raises the limit
+#: The extensions a song may have where we look for songs (a music folder, an upload).
+AUDIO_SUFFIXES = frozenset({".ogg", ".oga", ".wav", ".flac", ".mp3", ".m4a", ".opus", ".aac", ".webm", ".aif",
+                            ".aiff"})
