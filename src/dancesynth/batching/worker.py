@@ -7,6 +7,7 @@ song that fails becomes a ``failed`` record with the reason; it never stops the 
 from __future__ import annotations
 
 import os
+import resource
 import socket
 import time
 from dataclasses import dataclass
@@ -79,6 +80,7 @@ class Worker:
         except Exception as exc:  # a bug met on one song must not stop the other 99,999
             record.update(status="failed", error=f"internal error: {type(exc).__name__}: {exc}")
         record.update(seconds=time.perf_counter() - t0, cpu_seconds=time.process_time() - cpu0,
+                      peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
                       finished_at=datetime.now(timezone.utc).isoformat(timespec="seconds"))
         return record
 
