@@ -1,6 +1,7 @@
 """Benchmark of `dancesynth render`: MP4 frames per second with the stick figure and the skinned mannequin.
 
-    .venv/bin/python benchmarks/render_speed.py [--seconds 20] [--sizes 960x540,1920x1080] [--out benchmarks/results]
+    .venv/bin/python benchmarks/render_speed.py [--seconds 20] [--sizes 960x540,1920x1080] [--repeat 1]
+                                                [--out benchmarks/results]
 
 A fixed dance: the first ``--seconds`` of a bundled song, danced from the bundled
 database with a fixed seed and retargeted onto the built-in mannequin. Each size and
@@ -9,7 +10,8 @@ skinning, drawing, H.264 + AAC encoding by ffmpeg with the song excerpt muxed in
 The table gives frames rendered per second of wall time and the multiple of real time
 (video seconds per wall second; 1.0 = real time), plus the CPU seconds of Python (the
 renderer) and of ffmpeg (running beside it): on a busy machine the wall time suffers
-and the CPU times say where the work went. The load average is recorded for that reason.
+and the CPU times say where the work went. The load average is recorded for that reason,
+and ``--repeat N`` renders each row N times, interleaved, and keeps the fastest.
 
 Prints a table and writes ``render_speed.json`` into the output folder.
 """
@@ -69,28 +71,36 @@ def main(argv=None) -> int:
     ap.add_argument("--seconds", type=float, default=20.0, help="length of the dance (default 20)")
     ap.add_argument("--sizes", default="960x540,1920x1080", help="comma-separated WIDTHxHEIGHT (default %(default)s)")
     ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results")
+    ap.add_argument("--repeat", type=int, default=1, help="render each row this many times, keep the fastest")
     ap.add_argument("--keep", type=Path, help="also keep the videos in this folder")
     args = ap.parse_args(argv)
     sys.path.insert(0, str(REPO / "src"))
+    from dancesynth.export import video
     from dancesynth.io.files import atomic_output
 
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
     load_before = os.getloadavg()
-    rows = []
+    best = {}
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         song, clip, character = make_dance(args.seconds, tmp)
-        for width, height in sizes:
-            for figure in FIGURES:
-                folder = args.keep or tmp
-                folder.mkdir(parents=True, exist_ok=True)
-                row = bench(clip, song, character, figure, width, height, folder / f"{figure}_{width}x{height}.mp4")
-                rows.append(row)
-                print(f"  {figure} {width}x{height}: {row['fps']:.1f} fps", file=sys.stderr)
+        for _ in range(max(1, args.repeat)):
+            for width, height in sizes:
+                for figure in FIGURES:
+                    folder = args.keep or tmp
+                    folder.mkdir(parents=True, exist_ok=True)
+                    row = bench(clip, song, character, figure, width, height,
+                                folder / f"{figure}_{width}x{height}.mp4")
+                    key = (figure, width, height)
+                    if key not in best or row["wall_s"] < best[key]["wall_s"]:
+                        best[key] = row
+                    print(f"  {figure} {width}x{height}: {row['fps']:.1f} fps", file=sys.stderr)
+    rows = list(best.values())
     load_after = os.getloadavg()
 
     print(f"render speed: {clip.n_frames} frames ({clip.duration_s:.1f} s at {clip.fps:g} fps), "
-          f"{os.cpu_count()} CPUs, load average {load_before[0]:.2f} before, {load_after[0]:.2f} after")
+          f"{os.cpu_count()} CPUs, load average {load_before[0]:.2f} before, {load_after[0]:.2f} after"
+          + (f", fastest of {args.repeat}" if args.repeat > 1 else ""))
     print(f"{'figure':<10} {'size':>10} {'frames':>7} {'wall s':>7} {'fps':>6} {'x real time':>12} "
           f"{'python cpu s':>13} {'ffmpeg cpu s':>13}")
     for r in rows:
@@ -103,7 +113,9 @@ def main(argv=None) -> int:
               "dance": {"song": SONG.name, "seconds": clip.duration_s, "frames": clip.n_frames, "fps": clip.fps,
                         "seed": SEED, "character": character.name,
                         "mesh_triangles": int(len(character.mesh.indices))},
-              "runs": rows}
+              "encoder": {"codec": "libx264", "preset": video.X264_PRESET, "params": video.X264_PARAMS,
+                          "crf": video.X264_CRF, "input_pix_fmt": "yuv420p"},
+              "repeat": max(1, args.repeat), "runs": rows}
     with atomic_output(args.out / "render_speed.json") as fh:
         json.dump(result, fh, indent=1)
         fh.write("\n")

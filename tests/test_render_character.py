@@ -19,8 +19,8 @@ from dancesynth import rotations as rot
 from dancesynth.errors import InputError
 from dancesynth.export import render_video, render_video_files
 from dancesynth.export import render as render_mod
-from dancesynth.export.render import COLOURS, FrameRenderer, clip_pose
-from dancesynth.export.skinned import SkinnedMesh, paint
+from dancesynth.export.render import COLOURS, FrameRenderer, _smooth_lines, _upsample, clip_pose
+from dancesynth.export.skinned import SkinnedMesh, paint, rasterise
 from dancesynth.retarget.character import Character, Mesh
 from dancesynth.retarget.rigs import rig_skeleton
 from dancesynth.types import MotionClip
@@ -255,11 +255,91 @@ def test_triangles_off_the_picture_are_clipped():
 
 
 
+def test_a_box_of_the_canvas_gets_what_the_whole_canvas_would():
+    """The renderer rasterises only the box round the dancer, with the box's corner as the offset."""
+    mesh = flat_mesh(np.zeros((2, 3, 3)), [(1.0, 0.5, 0.2), (0.2, 0.5, 1.0)])
+    uv = np.vstack([TRIANGLE, TRIANGLE + [8, 2]])
+    posed = (uv[:, 0].astype(np.float32), uv[:, 1].astype(np.float32), np.float32([2, 2, 2, 1, 1, 1]),
+             np.ones(6, np.float32))
+    whole = np.zeros((48, 64), np.uint32)
+    assert rasterise(whole, mesh, posed)
+    box = np.full((30, 40), 7, np.uint32)  # the picture's pixels (6..46, 4..34), with something drawn already
+    assert rasterise(box, mesh, posed, offset=(6, 4))
+    expected = whole[4:34, 6:46]
+    np.testing.assert_array_equal(box, np.where(expected > 0, expected, 7))
+    assert not rasterise(np.zeros((10, 10), np.uint32), mesh, posed, offset=(100, 100))  # off the box
+
+
+def test_grid_lines_are_one_pixel_wide_at_any_slope_and_stay_on_the_picture():
+    base = 200.0
+    for end in [(60, 20.0), (60, 45.0), (35, 70), (20.5, 75)]:  # from level to steep
+        img = np.full((80, 80), int(base), np.uint8)
+        start = np.array([[20.0, 20.0]])
+        _smooth_lines(img, start, np.array([end], float), np.array([100.0]), base)
+        dark = (base - img.astype(float)) / 100.0  # 1 where a pixel is wholly covered
+        length = float(np.hypot(*(np.array(end) - start[0])))
+        assert dark.sum() == pytest.approx(length, rel=0.1)  # area = length x 1 pixel
+        assert dark.max() <= 1.0 + 1e-6
+    img = np.full((40, 40), 200, np.uint8)  # lines that leave the picture, or never enter it
+    _smooth_lines(img, np.array([[-50.0, 10.0], [10.0, -30.0], [-10.0, -10.0]]),
+                  np.array([[90.0, 30.0], [15.0, 90.0], [-5.0, -40.0]]), np.array([50.0, 50.0, 50.0]), 200.0)
+    assert (img < 200).sum() > 60
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint32, np.int16])
+@pytest.mark.parametrize("factor", [1, 2, 3])
+def test_upsampling_makes_each_pixel_a_block(dtype, factor):
+    a = np.arange(35).reshape(5, 7).astype(dtype) * 3
+    np.testing.assert_array_equal(_upsample(a, factor), a.repeat(factor, axis=0).repeat(factor, axis=1))
+
+
+def raised_dance(character: Character) -> MotionClip:
+    """The waving dance, lifted 1.5 m in its last third: the dancer rises into the sky above the horizon."""
+    clip = waving_dance(character)
+    root = clip.root_pos.copy()
+    root[2 * clip.n_frames // 3:, 1] += 1.5
+    return MotionClip(clip.skeleton, clip.fps, root, clip.local_rot)
+
+
+def yuv_to_rgb(frame: np.ndarray, w: int, h: int) -> np.ndarray:
+    """An (H, W, 3) float RGB picture from yuv420p planes (BT.601, limited range; chroma repeated)."""
+    y = frame[:w * h].reshape(h, w).astype(float)
+    cb, cr = (frame[w * h + k * (w * h // 4):w * h + (k + 1) * (w * h // 4)].reshape(h // 2, w // 2)
+              .repeat(2, 0).repeat(2, 1).astype(float) - 128.0 for k in (0, 1))
+    y = (y - 16.0) * 255.0 / 219.0
+    cb, cr = cb * 255.0 / 224.0, cr * 255.0 / 224.0
+    return np.stack([y + 1.402 * cr, y - 0.344136 * cb - 0.714136 * cr, y + 1.772 * cb], axis=-1)
+
+
+@pytest.mark.parametrize("with_mesh", [True, False])
+def test_the_planes_for_the_encoder_show_the_rgb_picture(character, with_mesh):
+    """yuv420p frames are the rgb24 frames as ffmpeg would convert them, in the sky band above the floor too."""
+    dance = raised_dance(character)
+    mesh = SkinnedMesh.from_character(character) if with_mesh else None
+    frames = [10, 80]
+    rgb = render_frames(dance, mesh, frames)
+    yuv = list(FrameRenderer(dance, W, H, mesh=mesh, pix_fmt="yuv420p").frames(frames))
+    for a, b in zip(rgb, yuv):
+        assert b.dtype == np.uint8 and b.size == W * H * 3 // 2
+        diff = np.abs(yuv_to_rgb(b, W, H) - a).max(axis=-1)
+        assert np.median(diff) <= 1.5 and np.percentile(diff, 95) < 12  # chroma at half size blurs colour edges
+
+
+def test_the_dancer_is_drawn_over_the_sky_too(character, monkeypatch):
+    """The rows above the floor are drawn once; a dancer who rises into them is still drawn there."""
+    dance = raised_dance(character)
+    r = FrameRenderer(dance, W, H, mesh=SkinnedMesh.from_character(character))
+    assert 0 < r.band < H // 2
+    for mesh in (SkinnedMesh.from_character(character), None):
+        (_, low), (_, high) = figure_masks(dance, mesh, [10, 80], monkeypatch)
+        assert not low[:r.band].any() and high[:r.band].sum() > 30
+
+
 def figure_masks(dance, mesh, frames, monkeypatch) -> list[tuple[np.ndarray, np.ndarray]]:
     """Each frame, and the pixels where the figure is: those that differ from the frame drawn without it."""
     shown = render_frames(dance, mesh, frames)
     with monkeypatch.context() as m:
-        m.setattr(render_mod, "paint", lambda *args: None)
+        m.setattr(render_mod, "rasterise", lambda *args: None)
         m.setattr(FrameRenderer, "_draw_figure", lambda *args: None)
         empty = render_frames(dance, mesh, frames)  # with the figure's shadow
     return [(img, np.abs(img.astype(int) - bg).sum(axis=-1) > 30) for img, bg in zip(shown, empty)]

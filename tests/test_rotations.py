@@ -32,3 +32,15 @@ def test_broadcasting_and_the_edge_cases():
     assert np.allclose(rot.exp(w), Rotation.from_rotvec(w).as_quat(canonical=False), atol=1e-12)
     u = rng.normal(size=(4, 3))
     assert np.allclose(rot.apply(rot.exp(w), u), Rotation.from_rotvec(w).apply(u), atol=1e-12)
+
+
+def test_euler_angles_in_pieces_are_those_of_the_whole(monkeypatch):
+    """A long dance's Euler angles are converted a few thousand frames at a time (memory); the
+    angles, continuous across the pieces, are those of one conversion."""
+    rng = np.random.default_rng(3)
+    q = np.cumsum(rng.normal(size=(500, 4, 4)) * 0.1, axis=0) + np.array([0, 0, 0, 2.0])
+    whole = rot.to_euler(q, "ZXY")
+    monkeypatch.setattr(rot, "EULER_CHUNK", 37)
+    assert np.array_equal(rot.to_euler(q, "ZXY"), whole)
+    assert np.array_equal(rot.to_euler(q[250:], "ZXY", prev=whole[249]), whole[250:])
+    assert np.all(np.abs(np.diff(whole, axis=0)) < 90)   # continuous: no 360-degree flips

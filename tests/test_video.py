@@ -83,6 +83,8 @@ def test_mp4_has_h264_video_and_aac_audio_of_the_songs_length(rendered, dance_cl
     assert len(video) == 1 and len(audio) == 1
     v, a = video[0], audio[0]
     assert v["codec_name"] == "h264" and v["pix_fmt"] == "yuv420p"
+    # The renderer hands ffmpeg BT.601 limited-range Y'CbCr, and the stream says so (players need not guess).
+    assert v.get("color_space") == "smpte170m" and v.get("color_range") == "tv"
     assert (v["width"], v["height"]) == (W, H)
     assert a["codec_name"] == "aac"
     assert int(v["nb_frames"]) == dance_clip.n_frames == result["frames"]

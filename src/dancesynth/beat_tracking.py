@@ -44,6 +44,8 @@ MAX_BPM = 320.0
 # The tempogram's windows advance by this fraction of the window: their mean
 # barely changes from a hop of one frame (librosa's) and costs 1/25 as much.
 _TEMPOGRAM_HOP_FRACTION = 1.0 / 25
+# Autocorrelation windows transformed at a time (memory: ~60 kB a window at 50 fps).
+_ACF_ROWS = 128
 
 
 def estimate_tempo(onset_env: np.ndarray, fps: float, *, start_bpm: float = 120.0, std_bpm: float = 1.0,
@@ -89,18 +91,30 @@ def window_autocorrelation(env: np.ndarray, win: int, hop: int) -> tuple[np.ndar
     lags ``0..win-1`` divided by its value at lag 0 (all 0 for a window without
     onsets), and that lag-0 value (the window's onset energy).
     """
+    blocks = list(window_autocorrelation_blocks(env, win, hop))
+    if len(blocks) == 1:
+        return blocks[0][1:]
+    return np.concatenate([b[1] for b in blocks]), np.concatenate([b[2] for b in blocks])
+
+
+def window_autocorrelation_blocks(env: np.ndarray, win: int, hop: int, *, rows: int = _ACF_ROWS):
+    """``window_autocorrelation`` a block of ``rows`` windows at a time: yields ``(first window,
+    acf, lag-0 value)``, row for row the same numbers, in memory for one block (a 30-minute song
+    has 7,200 windows: 140 MB of spectra at once)."""
+    env = np.asarray(env, dtype=np.float64)
     n = env.size
     half = win // 2
     padded = np.concatenate((np.linspace(0.0, env[0], half, endpoint=False), env,
                              np.linspace(env[-1], 0.0, half + 1)[1:]))
     starts = np.arange(0, n, hop)
     window = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(win) / win)
-    frames = padded[starts[:, None] + np.arange(win)[None, :]] * window
     n_fft = 1 << int(np.ceil(np.log2(2 * win - 1)))
-    spectrum = np.fft.rfft(frames, n_fft, axis=1)
-    acf = np.fft.irfft(spectrum.real ** 2 + spectrum.imag ** 2, n_fft, axis=1)[:, :win]
-    norm = acf[:, :1]
-    return np.where(norm > 1e-20, acf / np.maximum(norm, 1e-20), 0.0), norm[:, 0]
+    for first in range(0, starts.size, rows):
+        frames = padded[starts[first:first + rows, None] + np.arange(win)[None, :]] * window
+        spectrum = np.fft.rfft(frames, n_fft, axis=1)
+        acf = np.fft.irfft(spectrum.real ** 2 + spectrum.imag ** 2, n_fft, axis=1)[:, :win]
+        norm = acf[:, :1]
+        yield first, np.where(norm > 1e-20, acf / np.maximum(norm, 1e-20), 0.0), norm[:, 0]
 
 
 def tempo_curve(onset_env: np.ndarray, fps: float, *, window_s: float = 8.0, hop_s: float = 0.25,
@@ -124,10 +138,8 @@ def tempo_curve(onset_env: np.ndarray, fps: float, *, window_s: float = 8.0, hop
     n = env.size
     win = max(int(window_s * fps), 8)
     hop = max(1, int(round(hop_s * fps)))
-    acf, energy = window_autocorrelation(env, win, hop)
-    acf = np.maximum(acf, 0.0)
-    sounding = energy[energy > 1e-20]
-    weight = np.clip(energy / np.median(sounding), 0.0, 1.0) if sounding.size else np.zeros_like(energy)
+    n_windows = len(range(0, n, hop))
+    energy = np.empty(n_windows)
     n_bins = int(np.floor(bins_per_octave * np.log2(max_bpm / min_bpm))) + 1
     grid = min_bpm * 2.0 ** (np.arange(n_bins) / bins_per_octave)
     lags = 60.0 * fps / grid
@@ -135,12 +147,18 @@ def tempo_curve(onset_env: np.ndarray, fps: float, *, window_s: float = 8.0, hop
     grid, lags = grid[keep], lags[keep]
     # A tempo's evidence is the autocorrelation at 1..harmonics beat periods: a
     # syncopated figure repeats with the bar, not with its own odd intervals.
-    obs = np.zeros((len(acf), grid.size))
-    for k in range(1, harmonics + 1):
-        lo = np.floor(k * lags).astype(np.int64)
-        frac = k * lags - lo
-        obs += acf[:, lo] * (1.0 - frac) + acf[:, lo + 1] * frac
+    obs = np.zeros((n_windows, grid.size))
+    for first, acf, norm in window_autocorrelation_blocks(env, win, hop):
+        acf = np.maximum(acf, 0.0)
+        rows = slice(first, first + len(acf))
+        energy[rows] = norm
+        for k in range(1, harmonics + 1):
+            lo = np.floor(k * lags).astype(np.int64)
+            frac = k * lags - lo
+            obs[rows] += acf[:, lo] * (1.0 - frac) + acf[:, lo + 1] * frac
     obs /= harmonics
+    sounding = energy[energy > 1e-20]
+    weight = np.clip(energy / np.median(sounding), 0.0, 1.0) if sounding.size else np.zeros_like(energy)
     # One scale for the whole song: a window whose periodicity is weak (a break, a
     # fill) has little say against the cost of changing tempo.
     peaks = obs.max(axis=1)
@@ -148,9 +166,11 @@ def tempo_curve(onset_env: np.ndarray, fps: float, *, window_s: float = 8.0, hop
     prior = -0.5 * (np.log2(grid / start_bpm) / std_bpm) ** 2
     octaves = np.abs(np.subtract.outer(np.arange(grid.size), np.arange(grid.size))) / bins_per_octave
     transition = -change_cost * octaves
-    gain = weight[:, None] * (obs + prior[None, :])
+    gain = obs                                         # in place: weight * (obs + prior)
+    gain += prior[None, :]
+    gain *= weight[:, None]
     score = gain[0]
-    back = np.zeros((len(obs), grid.size), dtype=np.int64)
+    back = np.zeros((len(obs), grid.size), dtype=np.int16 if grid.size < 2 ** 15 else np.int64)
     for w in range(1, len(obs)):
         candidates = score[None, :] + transition       # [to, from]
         back[w] = np.argmax(candidates, axis=1)

@@ -31,11 +31,17 @@ def on_dance_character(clip, target):
 
 
 def write_on_character(clip, target, output, *, song, report_path=None, report=None, quiet=False):
-    """Write ``clip`` put on ``target`` (``export.formats.output_character``'s choice) in ``output``'s format, with the
-    report if asked: both or neither. Returns ``(the clip on the character, the Character)``."""
+    """Write ``clip`` put on ``target`` (``export.formats.output_character``'s choice) in ``output``'s
+    format, with the report if asked: both or neither. Returns ``(the clip on the character, the Character)``."""
+    moved, target = on_dance_character(clip, target)
+    write_moved(moved, target, output, song=song, report_path=report_path, report=report, quiet=quiet)
+    return moved, target
+
+
+def write_moved(moved, target, output, *, song, report_path=None, report=None, quiet=False) -> None:
+    """``write_on_character`` for a clip already on its character."""
     from .export.formats import write_dance
 
-    moved, target = on_dance_character(clip, target)
     progress = Progress(enabled=not quiet and sys.stderr.isatty() and output.suffix.lower() == ".mp4")
     try:
         write_dance(output, moved, target, song=song, progress=lambda done, total: progress("render", done, total))
@@ -47,7 +53,6 @@ def write_on_character(clip, target, output, *, song, report_path=None, report=N
         except BaseException:
             output.unlink(missing_ok=True)
             raise
-    return moved, target
 
 
 @click.command()

@@ -133,19 +133,36 @@ def _hamilton(a: np.ndarray, b: np.ndarray) -> np.ndarray:
                      aw * bw - ax * bx - ay * by - az * bz], axis=-1)
 
 
-def to_euler(q, order: str) -> np.ndarray:
+def to_euler(q, order: str, *, prev=None) -> np.ndarray:
     """BVH Euler angles (degrees, intrinsic ``order``) that vary continuously along axis 0.
 
     Every rotation has two Euler triples (plus 360-degree wraps). Animation tools
     interpolate the numbers, so we pick, frame by frame, the triple closest to the
-    previous frame; the first frame uses SciPy's canonical range.
+    previous frame; the first frame uses SciPy's canonical range. SciPy converts
+    ``EULER_CHUNK`` frames at a time: a 30-minute dance at once took 230 MB. ``prev``, the
+    angles of the frame before ``q[0]``, continues a sequence converted in pieces.
     """
+    q = np.asarray(q, dtype=np.float64)
+    if (q.ndim < 2 or q.shape[0] < 2) and prev is None:
+        return _euler(q, order.upper())
+    out = np.empty(q.shape[:-1] + (3,))
+    for a in range(0, q.shape[0], EULER_CHUNK):
+        b = min(a + EULER_CHUNK, q.shape[0])
+        out[a:b] = _continuous(_euler(q[a:b], order.upper()), order.upper(), out[a - 1] if a else prev)
+    return out
+
+
+EULER_CHUNK = 4096
+
+
+def _euler(q: np.ndarray, order: str) -> np.ndarray:
     from scipy.spatial.transform import Rotation  # here: the command line's start-up never needs it
 
-    order = order.upper()
-    e = Rotation.from_quat(np.asarray(q, dtype=np.float64)).as_euler(order, degrees=True)
-    if e.ndim < 2 or e.shape[0] < 2:
-        return e
+    return Rotation.from_quat(q).as_euler(order, degrees=True)
+
+
+def _continuous(e: np.ndarray, order: str, prev: np.ndarray | None) -> np.ndarray:
+    """``e``'s frames, each as the Euler triple closest to the frame before (``prev`` before the first)."""
     # The other triple of a proper (Tait-Bryan) order: (a + 180, 180 - b, c + 180);
     # for a symmetric order such as ZXZ it is (a + 180, -b, c + 180).
     alt = e.copy()
@@ -153,9 +170,10 @@ def to_euler(q, order: str) -> np.ndarray:
     alt[..., 1] = (180.0 - e[..., 1]) if len(set(order)) == 3 else -e[..., 1]
     alt[..., 2] += 180.0
     out = np.empty_like(e)
-    out[0] = e[0]
-    for i in range(1, e.shape[0]):
-        prev = out[i - 1]
+    start = 0
+    if prev is None:
+        out[0], prev, start = e[0], e[0], 1
+    for i in range(start, e.shape[0]):
         best = None
         for cand in (e[i], alt[i]):
             cand = cand + 360.0 * np.round((prev - cand) / 360.0)
@@ -164,5 +182,5 @@ def to_euler(q, order: str) -> np.ndarray:
             else:
                 closer = np.sum(np.abs(cand - prev), axis=-1) < np.sum(np.abs(best - prev), axis=-1)
                 best = np.where(closer[..., None], cand, best)
-        out[i] = best
+        out[i] = prev = best
     return out

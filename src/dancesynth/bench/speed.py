@@ -10,6 +10,9 @@
   replicated 1x..10x, each size in a fresh process.
 - ``pipeline``: every bundled graph built and reloaded from the cache, and a
   3-minute song to BVH (analysis, synthesis, writing) in a fresh process.
+- ``segment_costs`` and ``replicated_search`` (``benchmarks/segment_speed.py``): one streaming
+  segment split into search, stitching, foot lock and BVH text, and the search on the largest
+  style replicated 10x.
 """
 
 from __future__ import annotations
@@ -274,6 +277,88 @@ def format_scaling(s: dict) -> str:
                "the database and graph included",
                "search/step ms = per streaming segment (median, max); stream song s = all segments; global = "
                "one DP over the whole song, search alone and with rendering"])
+
+
+# ---------------------------------------------------------------------------------------------
+# Per-segment cost, phase by phase (benchmarks/segment_speed.py)
+
+SEGMENT_PHASES = ("search", "stitch", "foot_lock", "step", "bvh_text", "total")
+
+
+def segment_costs(style, graph, music, *, segment_s: float = 5.0, repeats: int = 7,
+                  progress: Progress | None = None) -> dict:
+    """What one streaming segment costs, phase by phase: the path search, stitching and foot lock
+    (with the step's own bookkeeping, one ``GraphEngine.step``), and the BVH text of the segment's
+    frames (``format_bvh``).
+
+    Each repeat dances the whole song with a fresh engine, so nothing one repeat computed helps
+    the next (a new song's beat lengths are new too). Per segment the fastest repeat counts (the
+    one least disturbed by other processes); the result gives the median and max over segments, in
+    ms, and the CPU time per segment of the fastest whole repeat.
+    """
+    from ..api import DanceConfig, synthesise
+    from ..engines.beatgrid import beat_grid
+    from ..engines.graph.engine import GraphEngine
+    from ..io.bvh_writer import format_bvh
+    from ..types import MotionClip
+
+    grid = beat_grid(music)
+    per_repeat, cpu = [], []
+    for r in range(repeats):
+        if progress:
+            progress(f"segment costs: repeat {r + 1}/{repeats} ({style.name})")
+        engine = GraphEngine(style, graph)
+        engine.steps  # the graph's step costs are built once per engine, not per segment
+        c = time.process_time()
+        segs, stats = synthesise(engine, grid, music.duration_s, DanceConfig(segment_s=segment_s))
+        text_s = []
+        for seg in segs:
+            t = time.perf_counter()
+            format_bvh(MotionClip(style.skeleton, engine.fps, seg.root_pos, seg.local_rot))
+            text_s.append(time.perf_counter() - t)
+        cpu.append((time.process_time() - c) / len(segs))
+        search = np.array([x.search_s for x in segs])
+        lock = np.array([x.foot_lock_s for x in segs])
+        stitch = np.array([x.render_s for x in segs]) - lock
+        per_repeat.append({"search": search, "stitch": stitch, "foot_lock": lock, "step": np.array(stats["step_s"]),
+                           "bvh_text": np.array(text_s)})
+    phases = {}
+    for name in SEGMENT_PHASES:
+        t = (np.stack([r["step"] + r["bvh_text"] for r in per_repeat]) if name == "total"
+             else np.stack([r[name] for r in per_repeat]))
+        best = t.min(axis=0) * 1e3
+        phases[name] = {"median": float(np.median(best)), "max": float(best.max())}
+    return {"style": style.name, "N": graph.n_nodes, "D": graph.mean_in_degree, "segment_s": segment_s,
+            "segments": len(per_repeat[0]["search"]), "repeats": repeats, "phases_ms": phases,
+            "cpu_ms_per_segment": float(min(cpu) * 1e3)}
+
+
+def replicated_search(db, music, *, times: int = 10, segment_s: float = 5.0, repeats: int = 3,
+                      progress: Progress | None = None) -> dict:
+    """Search time per streaming segment on the largest style replicated ``times`` x (as in ``scaling``,
+    but in this process with the graph from the cache, and a fresh engine per repeat)."""
+    from ..api import DanceConfig, synthesise
+    from ..engines.beatgrid import beat_grid
+    from ..engines.graph.cache import load_graph
+    from ..engines.graph.engine import GraphEngine
+
+    style = replicate(largest_style(db), times)
+    if progress:
+        progress(f"replicated search: graph of {style.name} (built once, then from the cache)")
+    graph, _ = load_graph(style)
+    grid = beat_grid(music)
+    runs = []
+    for r in range(repeats):
+        if progress:
+            progress(f"replicated search: repeat {r + 1}/{repeats}")
+        engine = GraphEngine(style, graph)
+        engine.steps  # built once per engine, not per segment
+        segs, _ = synthesise(engine, grid, music.duration_s, DanceConfig(segment_s=segment_s))
+        runs.append([x.search_s for x in segs])
+    best = np.min(runs, axis=0) * 1e3
+    return {"style": style.name, "times": times, "N": graph.n_nodes, "D": graph.mean_in_degree,
+            "segment_s": segment_s, "segments": len(best), "repeats": repeats,
+            "search_ms": {"median": float(np.median(best)), "max": float(best.max())}}
 
 
 # ---------------------------------------------------------------------------------------------

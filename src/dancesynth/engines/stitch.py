@@ -31,10 +31,9 @@ import numpy as np
 
 from .. import rotations as rot
 from ..errors import InputError
-from ..kinematics import fk
 from ..motion.database import Style
 from ..motion.resample import sample_frames
-from ..motion.roles import find_roles
+from ..motion.roles import JointRoles, find_roles
 
 
 @dataclass(frozen=True)
@@ -173,11 +172,42 @@ class Blend:
         return self.t0 + max(float(np.max(self.duration)), float(np.max(self.pos_duration)))
 
     def at(self, t: np.ndarray):
-        dt = np.asarray(t, float)[:, None] - self.t0
-        h00, h10 = decay_basis(np.clip(dt / self.duration, 0.0, 1.0))            # (n, J)
-        rx = h00[..., None] * self.rot_x0 + (h10 * self.duration)[..., None] * self.rot_v0
-        p00, p10 = decay_basis(np.clip(dt / self.pos_duration, 0.0, 1.0))      # (n, 3)
-        return rx, p00 * self.pos_x0 + p10 * self.pos_duration * self.pos_v0
+        """The offsets at times ``t`` (n,): rotation vectors (n, J, 3) and root positions (n, 3)."""
+        return self.rot_at(t), self.pos_at(t)
+
+    def rot_at(self, t: np.ndarray) -> np.ndarray:
+        return _rot_offsets(np.asarray(t, float)[:, None] - self.t0, self.duration, self.rot_x0, self.rot_v0)
+
+    def pos_at(self, t: np.ndarray) -> np.ndarray:
+        return _pos_offsets(np.asarray(t, float)[:, None] - self.t0, self.pos_duration, self.pos_x0, self.pos_v0)
+
+
+def _rot_offsets(dt, duration, x0, v0):
+    """Rotation offsets ``dt`` (n, 1) after a blend's start: each joint's decay over its ``duration`` (J,)."""
+    h00, h10 = decay_basis(np.clip(dt / duration, 0.0, 1.0))            # (n, J)
+    return h00[..., None] * x0 + (h10 * duration)[..., None] * v0
+
+
+def _pos_offsets(dt, duration, x0, v0):
+    """Root offsets ``dt`` (n, 1) after a blend's start: each axis's decay over its ``duration`` (3,)."""
+    p00, p10 = decay_basis(np.clip(dt / duration, 0.0, 1.0))            # (n, 3)
+    return p00 * x0 + p10 * duration * v0
+
+
+def _blends_at(blends: list, counts, t: np.ndarray, positions: bool = True):
+    """``Blend.at`` of several blends at once: blend ``i`` at the next ``counts[i]`` of the times ``t``
+    (n,); ``positions=False``: the rotation offsets alone (``rot_at``)."""
+
+    def each(values):
+        return np.repeat(np.stack(values), counts, axis=0)
+
+    dt = np.asarray(t, float)[:, None] - each([b.t0 for b in blends])[:, None]
+    rx = _rot_offsets(dt, each([b.duration for b in blends]), each([b.rot_x0 for b in blends]),
+                      each([b.rot_v0 for b in blends]))
+    if not positions:
+        return rx
+    return rx, _pos_offsets(dt, each([b.pos_duration for b in blends]), each([b.pos_x0 for b in blends]),
+                            each([b.pos_v0 for b in blends]))
 
 
 def carried_speed(size, accel, swing):
@@ -243,140 +273,296 @@ class StitchState:
     last_end_rate: float = 1.0       # its playback rate at its end, relative to its mean (``ease_rate``)
 
 
-def _place(style: Style, frames, yaw: float, offset: np.ndarray):
-    """Source poses at fractional ``frames``, placed on the floor by (yaw, offset)."""
+def _place(style: Style, frames, yaw, offset=None):
+    """Source poses at fractional ``frames``, turned by ``yaw`` and shifted on the floor by ``offset`` (2,):
+    one for all frames or one per frame; ``offset=None`` leaves the shift to the caller."""
     frames = np.atleast_1d(np.asarray(frames, dtype=np.float64))
     local, root, contacts = sample_frames(style.local_rot, style.root_pos, frames, style.contacts)
-    turn = rot.about_y(np.full(len(frames), yaw))
+    turn = rot.about_y(np.broadcast_to(np.asarray(yaw, dtype=np.float64), frames.shape))
     local = local.copy()
     local[:, 0] = rot.mul(turn, local[:, 0])
     root = rot.apply(turn, root)
-    root[:, [0, 2]] += offset
+    if offset is not None:
+        root[:, [0, 2]] += offset
     return local, root, contacts
 
 
-def _clamp_frame(style: Style, f: float, near: float) -> float:
-    """Keep an extrapolated source position inside the clip that contains ``near``."""
-    c = int(style.clip_of_frame(int(near)))
-    return float(np.clip(f, style.clip_starts[c], style.clip_starts[c + 1] - 1))
+def _shifted(root: np.ndarray, offset) -> np.ndarray:
+    """``root`` (n, 3) moved by ``offset`` (2,) on the floor."""
+    root = root.copy()
+    root[:, [0, 2]] += offset
+    return root
 
 
-def _posed(style, frames, yaw, offset, blend, times):
-    """Poses at source ``frames`` placed by (yaw, offset) and shown at ``times``, with ``blend`` applied."""
-    local, root, _ = _place(style, frames, yaw, offset)
-    if blend is not None:
-        rx, px = blend.at(np.asarray(times, float))
-        local = rot.mul(rot.exp(rx), local)
-        root = root + px
-    return local, root
+def _clamp_frames(style: Style, f: np.ndarray, near: np.ndarray) -> np.ndarray:
+    """Keep extrapolated source positions ``f`` (m, k) inside the clip that contains each of ``near`` (m,)."""
+    c = style.clip_of_frame(near.astype(np.int64))
+    return np.clip(f, style.clip_starts[c][:, None], style.clip_starts[c + 1][:, None] - 1)
 
 
-def _shown(style, f_at, rate, t_ref, times, yaw, offset, blend):
-    """Poses of a piece that shows source frame ``f_at`` at ``t_ref`` at ``rate``, at output ``times``."""
-    frames = [_clamp_frame(style, f_at + rate * (t - t_ref), f_at) for t in times]
-    return _posed(style, frames, yaw, offset, blend, times)
+@dataclass(frozen=True)
+class _Jump:
+    """What a jump (a piece starting somewhere else) needs: the piece it leaves and the one it starts."""
+
+    t0: float          # when it happens
+    yaw_old: float     # the old motion's placement turn, and the new one's
+    yaw: float
+    planted: np.ndarray  # (2,) feet planted in both motions at the jump
+    t_old: np.ndarray  # output times of the old motion's last two frames before t0 ...
+    t_new: np.ndarray  # ... and of the new one's first two
+    frames: np.ndarray  # (6,) source frames of the old motion at (t0, t_old), of the new one at (t0, t_new)
 
 
-def _jump_blend(style, state: StitchState, f_new: float, rate_new: float, yaw, offset, t0, blend_s,
-                fps: float) -> Blend:
-    """The inertialization offset that carries the old motion's pose and velocity into the new one.
+def _jumps_of(style: Style, pieces: Pieces, state: StitchState, yaw: float, start_rate, end_rate,
+              fps: float) -> dict:
+    """The jumps of ``pieces`` by piece index, with their placement turns (each keeps the old motion's
+    heading) and the source frames shown around them -- all that does not depend on where a previous
+    jump put the dance."""
+    k = np.flatnonzero(pieces.jump)
+    if state.last_f1 is None:
+        k = k[k > 0]  # the very first piece is placed at the origin instead
+    if not k.size:
+        return {}
+    # The piece each jump leaves: the one before it, or the previous call's last.
+    f0, f1, t0, t1 = (np.r_[getattr(state, "last_" + name) if state.last_f1 is not None else np.nan,
+                            getattr(pieces, name)[:-1]][k] for name in ("f0", "f1", "t0", "t1"))
+    rate_old = (f1 - f0) / (t1 - t0) * np.r_[state.last_end_rate, end_rate[:-1]][k]
+    new_f0, at = pieces.f0[k], pieces.t0[k]
+    rate_new = (pieces.f1[k] - new_f0) / (pieces.t1[k] - at) * start_rate[k]
+    ends = np.rint(np.stack([f1, new_f0], axis=1)).astype(np.int64)
+    heading = rot.heading(style.local_rot[ends, 0].astype(float))
+    planted = style.contacts[ends[:, 0]] & style.contacts[ends[:, 1]]
+    # The old motion's last two output frames before the jump and the new one's first two (a frame
+    # at t0 shows the new piece), and the source frames they show, extrapolated within each clip.
+    dt = 1.0 / fps
+    t_new = np.ceil(at * fps - 1e-9)[:, None] / fps + np.array([0.0, dt])
+    t_old = t_new[:, :1] - np.array([2 * dt, dt])
+    old = _clamp_frames(style, f1[:, None] + rate_old[:, None] * (t_old - at[:, None]), f1)
+    new = _clamp_frames(style, new_f0[:, None] + rate_new[:, None] * (t_new - at[:, None]), new_f0)
+    frames = np.concatenate([f1[:, None], old, new_f0[:, None], new], axis=1)
+    jumps = {}
+    for i, kk in enumerate(k.tolist()):
+        new_yaw = float(yaw + heading[i, 0] - heading[i, 1])
+        jumps[kk] = _Jump(float(at[i]), yaw, new_yaw, planted[i], t_old[i], t_new[i], frames[i])
+        yaw = new_yaw
+    return jumps
 
-    Only frames that are shown enter it: the old motion's last two output frames
-    before ``t0`` and the new one's first two, each extrapolated to ``t0`` at its
-    own angular velocity (source frames past a piece's end are never shown, and
-    mocap glitches there must not be blended in). The offset is ``log(old * new^-1)``
-    per joint; its velocity is the offset's own rate of change, so decaying it in
-    rotation-vector space keeps the shown angular velocity continuous however far
-    apart the poses are.
+
+def _blend_rotations(old, new, jumps: list, blend_s: float, fps: float):
+    """The rotation part of the inertialization at each of ``jumps``: offsets (m, J, 3), their
+    velocities and decay times (m, J).
+
+    ``old`` and ``new`` (m, 2, J, 4) are the two motions' poses at their two frames each side of
+    each jump (source frames past a piece's end are never shown, and mocap glitches there must
+    not be blended in), each extrapolated to ``t0`` at its own angular velocity. The offset is
+    ``log(old * new^-1)`` per joint; its velocity is the offset's own rate of change, so decaying
+    it in rotation-vector space keeps the shown angular velocity continuous however far apart
+    the poses are.
     """
     dt = 1.0 / fps
-    t_new = np.ceil(t0 * fps - 1e-9) / fps + np.array([0.0, dt])   # a frame at t0 shows the new piece
-    t_old = t_new[0] - np.array([2 * dt, dt])
-    rate_old = (state.last_f1 - state.last_f0) / (state.last_t1 - state.last_t0) * state.last_end_rate
-    old, old_root = _shown(style, state.last_f1, rate_old, t0, t_old, state.yaw, state.offset, state.blend)
-    new, new_root = _shown(style, f_new, rate_new, t0, t_new, yaw, offset, None)
-    w_old = rot.log(rot.mul(old[1], rot.inv(old[0]))) / dt
-    w_new = rot.log(rot.mul(new[1], rot.inv(new[0]))) / dt
-
-    def offset_at(t):
-        o = rot.mul(rot.exp(w_old * (t - t_old[1])), old[1])
-        n = rot.mul(rot.exp(w_new * (t - t_new[0])), new[0])
-        return rot.log(rot.mul(o, rot.inv(n)))
-
+    both = np.stack([old, new], axis=1)  # (jump, old/new, frame, J, 4)
+    w = rot.log(rot.mul(both[:, :, 1], rot.inv(both[:, :, 0]))) / dt
     eps = 1e-3 * dt
-    x0 = offset_at(t0)
-    v0 = (offset_at(t0 + eps) - offset_at(t0 - eps)) / (2 * eps)
+    # The offset at t0 and on either side of it (for its velocity), both motions extrapolated there:
+    # the old one from its last frame, the new one from its first.
+    t = np.array([[j.t0, j.t0 + eps, j.t0 - eps] for j in jumps])
+    since = np.stack([t - np.array([j.t_old[1] for j in jumps])[:, None],
+                      t - np.array([j.t_new[0] for j in jumps])[:, None]], axis=1)[..., None, None]
+    turned = rot.mul(rot.exp(w[:, :, None] * since), np.stack([old[:, 1], new[:, 0]], axis=1)[:, :, None])
+    offset = rot.log(rot.mul(turned[:, 0], rot.inv(turned[:, 1])))  # (jump, t0 / after / before, J, 3)
+    x0 = offset[:, 0]
+    v0 = (offset[:, 1] - offset[:, 2]) / (2 * eps)
     # Near 180 degrees the rotation vector wraps: no velocity there rather than a wrong one.
     v0[np.linalg.norm(v0, axis=-1) * eps > 1.0] = 0.0
     size, speed = np.linalg.norm(x0, axis=-1), np.linalg.norm(v0, axis=-1)
     carried = np.minimum(speed, carried_speed(size, BLEND_ACCEL_RAD_S2, BLEND_MAX_SWING_RAD))
-    v0 *= (carried / np.maximum(speed, 1e-9))[:, None]
-    duration = decay_time(size, carried, blend_s, BLEND_ACCEL_RAD_S2)
+    v0 *= (carried / np.maximum(speed, 1e-9))[..., None]
+    return x0, v0, decay_time(size, carried, blend_s, BLEND_ACCEL_RAD_S2)
+
+
+def _blend_positions(old_root, new_root, jump: _Jump, blend_s: float, fps: float):
+    """The root-position part of a jump's inertialization, from the roots (2, 3) of the same frames:
+    offset, velocity and decay times (3,), across the floor and up or down."""
+    dt = 1.0 / fps
     v_old, v_new = (old_root[1] - old_root[0]) / dt, (new_root[1] - new_root[0]) / dt
-    p0 = old_root[1] + v_old * (t0 - t_old[1]) - new_root[0] - v_new * (t0 - t_new[0])
+    p0 = old_root[1] + v_old * (jump.t0 - jump.t_old[1]) - new_root[0] - v_new * (jump.t0 - jump.t_new[0])
     pv0 = v_old - v_new
     across, up = [0, 2], [1]
-    pos_duration = np.empty(3)
-    for axes in (across, up):
-        pos_duration[axes] = decay_time(np.linalg.norm(p0[axes]), np.linalg.norm(pv0[axes]), blend_s,
-                                        BLEND_ACCEL_M_S2[axes[0]])
-    return Blend(float(t0), duration, x0, v0, pos_duration, p0, pv0)
+    size = np.array([np.linalg.norm(p0[across]), np.linalg.norm(p0[up])])
+    speed = np.array([np.linalg.norm(pv0[across]), np.linalg.norm(pv0[up])])
+    duration = decay_time(size, speed, blend_s, BLEND_ACCEL_M_S2[[0, 1]])
+    return p0, pv0, duration[[0, 1, 0]]
 
 
-def _aligned_placement(style, state: StitchState, f_new: float, t0: float):
-    """(yaw, offset) that puts source frame ``f_new`` where the old motion is at ``t0``, same heading.
+def _jump_frames(jumps: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The source frames each of ``jumps`` poses (``_Jump.frames``) and their turns, for ``_place``."""
+    order = list(jumps.values())
+    return (np.concatenate([j.frames for j in order]) if order else np.zeros(0),
+            np.array([[j.yaw_old] * 3 + [j.yaw] * 3 for j in order]).ravel())
 
-    Where a foot is planted in both motions, the new motion stands on the old one's
-    planted foot (both feet: their midpoint): the blend then moves the body over the
-    foot instead of dragging the foot, which the foot lock would otherwise have to
-    hold against a growing offset. Else the root continues from the old root.
+
+def _place_jumps(style: Style, jumps: dict, local, root, state: StitchState, ankles, blend_s: float, fps: float):
+    """Where each jump puts the new motion on the floor (offset) and its blend, in order; ``local`` and
+    ``root`` are the poses of ``_jump_frames``, placed without an offset.
+
+    At a jump the new motion keeps the old one's heading and, where a foot is planted in
+    both, stands on the old one's planted foot (both feet: their midpoint): the blend then
+    moves the body over the foot instead of dragging the foot, which the foot lock would
+    otherwise have to hold against a growing offset. Else the root continues from the old root.
+
+    Each jump depends on the one before: it places the new motion where the previous one put the
+    old motion, which it shows with the previous blend. Rotations never depend on where the dance
+    stands, so the poses of all jumps are sampled together, then the blends' rotations are found
+    (``_chain_rotations``), the feet's joint rotations for all jumps together (``_feet_steps``), and
+    the offsets and the blends' positions last (``_chain_positions``). Returns
+    ``[(offset (2,), Blend)]`` in the order of ``jumps``.
     """
-    old_yaw = state.yaw + rot.heading(style.local_rot[int(round(state.last_f1)), 0].astype(float))
-    new_yaw = rot.heading(style.local_rot[int(round(f_new)), 0].astype(float))
-    yaw = float(old_yaw - new_yaw)
-    planted = style.contacts[int(round(state.last_f1))] & style.contacts[int(round(f_new))]
-    if planted.any():
-        ankles = [a for a, p in zip(find_roles(style.skeleton).ankles, planted) if p]
-        sk = style.skeleton
-        old, old_root = _posed(style, [state.last_f1], state.yaw, state.offset, state.blend, [t0])
-        new, new_root = _posed(style, [f_new], yaw, np.zeros(2), None, [t0])
-        old_feet = fk(old, old_root, sk.offsets, sk.parents, only=ankles)[1][0, ankles]
-        new_feet = fk(new, new_root, sk.offsets, sk.parents, only=ankles)[1][0, ankles]
-        return yaw, (old_feet - new_feet).mean(axis=0)[[0, 2]]
-    _, old_root, _ = _place(style, [state.last_f1], state.yaw, state.offset)
-    _, new_root, _ = _place(style, [f_new], yaw, np.zeros(2))
-    return yaw, old_root[0, [0, 2]] - new_root[0, [0, 2]]
+    if not jumps:
+        return []
+    order = list(jumps.values())
+    m = len(order)
+    local, root = local.reshape(m, 2, 3, *local.shape[1:]), root.reshape(m, 2, 3, 3)  # jump, old/new, frame
+    times = np.array([np.r_[j.t0, j.t_old] for j in order])  # of the old motion's three frames
+    rotations, shown = _chain_rotations(local[:, 0], local[:, 1], order, times, state.blend, blend_s, fps)
+    feet = _feet_steps(style, ankles, order, shown, local[:, 1, 0])
+    return _chain_positions(root, order, times, feet, rotations, state, blend_s, fps)
+
+
+def _chain_rotations(old, new, jumps: list, times, blend: Blend | None, blend_s: float, fps: float, *,
+                     batch: bool = True):
+    """The rotation part of each jump's blend (``Blend`` without positions), and the old motion's pose at
+    each jump's ``t0`` as shown (m, J, 4).
+
+    ``old`` and ``new`` (m, 3, J, 4) are each jump's poses at (t0, two frames each side), ``times`` (m, 3)
+    the old ones' times. At a jump the old motion is shown with the previous jump's blend (``blend``: the
+    one in progress before the first), so each jump depends on the one before. But a blend lasts at
+    most a second and has always run out by the next jump, where it turns every joint by zero: so all
+    jumps are first taken as shown through zero offsets, at once, and then checked by applying the
+    blends so found where they are shown, again at once. They must give the same poses bit for bit;
+    from the first jump where they do not (a blend still running), the jumps are redone one by one
+    (``batch=False``: all of them, the reference the batch must equal).
+    """
+    m = len(jumps)
+    prior = np.ones(m, dtype=bool)  # a blend is shown at the jump (all but a first with none in progress)
+    prior[0] = blend is not None
+    guess = old.copy()
+    guess[prior] = rot.mul(rot.IDENTITY, old[prior])  # exp of zero offsets
+    found = _blend_rotations(guess[:, 1:], new[:, 1:], jumps, blend_s, fps)
+    blends = [Blend(j.t0, found[2][i], found[0][i], found[1][i], None, None, None) for i, j in enumerate(jumps)]
+    previous = [blend] + blends[:-1]
+    shown = old.copy()
+    at = np.flatnonzero(prior)
+    if at.size:
+        rx = _blends_at([previous[i] for i in at], 3, times[at].ravel(), positions=False)
+        shown[at] = rot.mul(rot.exp(rx.reshape(at.size, 3, *rx.shape[1:])), old[at])
+    same = (shown.view(np.uint64) == guess.view(np.uint64)).reshape(m, -1).all(axis=1) & batch
+    for i in range(int(np.argmin(same)) if not same.all() else m, m):
+        # One by one from here: the previous blend as it really is.
+        if i and not same[i]:
+            shown[i] = rot.mul(rot.exp(blends[i - 1].rot_at(times[i])), old[i])
+        x0, v0, duration = _blend_rotations(shown[i:i + 1, 1:], new[i:i + 1, 1:], jumps[i:i + 1], blend_s, fps)
+        blends[i] = Blend(jumps[i].t0, duration[0], x0[0], v0[0], None, None, None)
+        same[i + 1:] = False
+    return blends, shown[:, 0]
+
+
+def _chain_positions(root, jumps: list, times, feet, rotations: list, state: StitchState, blend_s: float,
+                     fps: float):
+    """Each jump's offset and whole blend (``rotations`` completed with its positions), as
+    ``[(offset (2,), Blend)]``.
+
+    ``root`` (m, 2, 3, 3) holds each jump's root positions as placed without an offset: the old
+    motion's at (t0, its last two frames), the new one's at (t0, its first two). Jump by jump: each
+    places the new motion where the previous one put the old motion, shown with the previous blend's
+    position offsets (unlike its rotations, often still running a beat later).
+    """
+    new_at_t0 = _shifted(root[:, 1, 0], np.zeros(2))
+    out, offset, blend = [], state.offset, state.blend
+    for i, jump in enumerate(jumps):
+        old = _shifted(root[i, 0], offset)
+        unblended = old[0]
+        if blend is not None:
+            old = old + blend.pos_at(times[i])
+        if jump.planted.any():
+            old_feet, new_feet = feet(i, old[0], new_at_t0[i], [side for side in range(2) if jump.planted[side]])
+            offset = (old_feet - new_feet).mean(axis=0)[[0, 2]]
+        else:
+            offset = unblended[[0, 2]] - new_at_t0[i, [0, 2]]
+        p0, pv0, duration = _blend_positions(old[1:], _shifted(root[i, 1, 1:], offset), jump, blend_s, fps)
+        r = rotations[i]
+        blend = Blend(r.t0, r.duration, r.rot_x0, r.rot_v0, duration, p0, pv0)
+        out.append((offset, blend))
+    return out
+
+
+def _feet_steps(style: Style, ankles, jumps: list, old, new):
+    """Forward kinematics of the ankles of the poses ``old`` and ``new`` (m, J, 4) at each jump, split so
+    that the root's position can come later: the chain's global rotations and rotated bone offsets are
+    found for all jumps at once, and ``feet(i, old_root, new_root, sides)`` sums them from the roots, in
+    the order ``kinematics.fk`` does (the same numbers). Returns ``feet``."""
+    sk = style.skeleton
+    sides = sorted({side for j in jumps for side in range(2) if j.planted[side]})
+    if not sides:
+        return None
+    chains = {}
+    for side in sides:
+        chain, j = [], ankles[side]
+        while sk.parents[j] >= 0:
+            chain.append(j)
+            j = sk.parents[j]
+        chains[side] = chain[::-1]  # from the root's child down to the ankle
+    joints = sorted({j for c in chains.values() for j in c})
+    column = {j: c for c, j in enumerate(joints)}
+    # Global rotations down to the ankles' parents, as kinematics.fk finds them (its positions are
+    # summed below instead, from the roots), and each joint's bone turned by its parent's.
+    poses = np.concatenate([old, new])
+    g_rot = {}
+    for j in sorted({sk.parents[j] for j in joints}):  # parents before children
+        p = sk.parents[j]
+        g_rot[j] = poses[:, j] if p < 0 else rot.mul(g_rot[p], poses[:, j])
+    bones = rot.apply(np.stack([g_rot[sk.parents[j]] for j in joints], axis=1), sk.offsets[joints])
+    bones = bones.reshape(2, len(jumps), len(joints), 3)  # (old/new, jump, joint, 3)
+
+    def feet(i, old_root, new_root, on):
+        out = []
+        for side in on:
+            pos = np.stack([old_root, new_root])
+            for j in chains[side]:
+                pos = pos + bones[:, i, column[j]]
+            out.append(pos)
+        return np.stack(out, axis=1)  # (old/new, sides, 3)
+
+    return feet
+
+
+def _after(state: StitchState, pieces: Pieces, k: int, end_rate: np.ndarray) -> StitchState:
+    """``state`` with piece ``k`` as the last one played."""
+    return replace(state, last_f0=float(pieces.f0[k]), last_f1=float(pieces.f1[k]), last_t0=float(pieces.t0[k]),
+                   last_t1=float(pieces.t1[k]), last_end_rate=float(end_rate[k]))
 
 
 def render(style: Style, pieces: Pieces, state: StitchState, *, fps: float, end_s: float,
-           blend_s: float = 0.3, inclusive_end: bool = False):
+           blend_s: float = 0.3, inclusive_end: bool = False, roles: JointRoles | None = None):
     """Render output frames ``state.next_frame ...`` up to time ``end_s``.
 
+    ``roles``: the style's ``find_roles``, when the caller keeps them (else found here).
     Returns ``(state, Rendered)``.
     """
     k_pieces = len(pieces)
-    yaws = np.empty(k_pieces)
-    offsets = np.empty((k_pieces, 2))
-    blends: list[tuple[float, Blend | None]] = [(-np.inf, state.blend)]
+    start_rate, end_rate = ease_rate(np.array([[0.0], [1.0]]), *pieces.timing(np.arange(k_pieces)))
     st = state
-    for k in range(k_pieces):
-        f0, f1, t0, t1 = float(pieces.f0[k]), float(pieces.f1[k]), float(pieces.t0[k]), float(pieces.t1[k])
-        if st.last_f1 is None:
-            # The very first piece: start at the origin, facing +Z.
-            heading = rot.heading(style.local_rot[int(f0), 0].astype(float))
-            yaw = float(-heading)
-            _, root, _ = _place(style, [f0], yaw, np.zeros(2))
-            offset = -root[0, [0, 2]]
-            st = replace(st, yaw=yaw, offset=offset)
-        elif pieces.jump[k]:
-            yaw, offset = _aligned_placement(style, st, f0, t0)
-            rate = (f1 - f0) / (t1 - t0) * float(ease_rate(0.0, *pieces.timing(k)))
-            blend = _jump_blend(style, st, f0, rate, yaw, offset, t0, blend_s, fps)
-            st = replace(st, yaw=yaw, offset=offset, blend=blend)
-            blends.append((t0, blend))
-        yaws[k], offsets[k] = st.yaw, st.offset
-        st = replace(st, last_f0=f0, last_f1=f1, last_t0=t0, last_t1=t1,
-                     last_end_rate=float(ease_rate(1.0, *pieces.timing(k))))
+    if k_pieces and st.last_f1 is None:
+        # The very first piece: start at the origin, facing +Z.
+        f0 = float(pieces.f0[0])
+        yaw = float(-rot.heading(style.local_rot[int(f0), 0].astype(float)))
+        _, root, _ = _place(style, [f0], yaw, np.zeros(2))
+        st = replace(st, yaw=yaw, offset=-root[0, [0, 2]])
+    jumps = _jumps_of(style, pieces, st, st.yaw, start_rate, end_rate, fps)
+    # Each piece's turn: the last placement's before it (a jump keeps the old heading, so all are
+    # known now; where each jump stands on the floor is found below).
+    yaws = np.full(k_pieces, st.yaw)
+    for k, jump in jumps.items():
+        yaws[k:] = jump.yaw
 
     # Output frames in this call's time range.
     last = int(np.floor(end_s * fps + 1e-9))
@@ -391,23 +577,39 @@ def render(style: Style, pieces: Pieces, state: StitchState, *, fps: float, end_
     clip = style.clip_of_frame(pieces.f0.astype(np.int64))[k]
     src = np.clip(src, style.clip_starts[clip], style.clip_starts[clip + 1] - 1)
 
-    n, n_joints = len(idx), style.skeleton.n_joints
-    raw_local = np.empty((n, n_joints, 4))
-    raw_root = np.empty((n, 3))
-    contacts = np.zeros((n, 2), dtype=bool)
-    for kk in np.unique(k):
-        sel = k == kk
-        raw_local[sel], raw_root[sel], contacts[sel] = _place(style, src[sel], yaws[kk], offsets[kk])
+    # The frames the jumps are measured on and the output frames, sampled and turned together.
+    n = len(idx)
+    jump_frames, jump_yaws = _jump_frames(jumps)
+    local, root, contacts = _place(style, np.r_[jump_frames, src], np.r_[jump_yaws, yaws[k]])
+    ankles = (roles or find_roles(style.skeleton)).ankles if jumps else None
+    placed = dict(zip(jumps, _place_jumps(style, jumps, local[:len(jump_frames)], root[:len(jump_frames)], st,
+                                          ankles, blend_s, fps)))
+    offsets = np.empty((k_pieces, 2))
+    blends: list[tuple[float, Blend | None]] = [(-np.inf, st.blend)]
+    offset = st.offset  # the placement in force: the last jump's before each piece
+    for kk in range(k_pieces):
+        if kk in placed:
+            offset, blend = placed[kk]
+            blends.append((blend.t0, blend))
+        offsets[kk] = offset
+    if placed:
+        st = replace(st, yaw=jumps[max(placed)].yaw, offset=offset, blend=blends[-1][1])
+    if k_pieces:
+        st = _after(st, pieces, k_pieces - 1, end_rate)
+    raw_local, raw_root, contacts = local[len(jump_frames):], root[len(jump_frames):], contacts[len(jump_frames):]
+    raw_root[:, [0, 2]] += offsets[k]
     local, root = raw_local.copy(), raw_root.copy()
-    starts = np.array([b[0] for b in blends])
-    which = np.searchsorted(starts, t, side="right") - 1
-    for b_i, (_, blend) in enumerate(blends):
-        sel = which == b_i
-        if blend is None or not sel.any():
-            continue
-        rx, px = blend.at(t[sel])
-        local[sel] = rot.mul(rot.exp(rx), local[sel])
-        root[sel] += px
+    # Each frame shows the blend of the last jump before it (if any): each blend's offsets on its
+    # frames (a run of them), then all applied at once.
+    bounds = np.searchsorted(t, [b[0] for b in blends] + [np.inf], side="left")
+    bounds[0] = 0
+    first = 0 if blends[0][1] is not None else bounds[1]  # frames from here on show a blend
+    if first < n:
+        shown = [(blend, hi - lo) for (_, blend), lo, hi in zip(blends, bounds[:-1], bounds[1:])
+                 if blend is not None and hi > lo]
+        rx, px = _blends_at([blend for blend, _ in shown], [count for _, count in shown], t[first:])
+        local[first:] = rot.mul(rot.exp(rx), local[first:])
+        root[first:] += px
     final_blend = blends[-1][1]
     if final_blend is not None and (n == 0 or t[-1] >= final_blend.end_s):
         final_blend = None

@@ -13,7 +13,7 @@ import numpy as np
 
 from .. import rotations as rot
 from ..errors import InputError
-from ..kinematics import clip_fk
+from ..kinematics import clip_fk, fk
 from ..motion import beats as motion_beats
 from ..motion.beats import kinematic_beats as motion_kinematic_beats
 from ..motion.beats import summed_speed
@@ -140,10 +140,32 @@ def beat_interval_energy(motion: MotionClip, beat_times_s, *, global_pos=None, m
     if masses.shape != (motion.skeleton.n_joints,):
         raise InputError(f"masses needs one value per joint ({motion.skeleton.n_joints}), got {masses.size}")
     n = motion.n_frames
-    energy = kinetic_energy(_positions(motion, global_pos), motion.fps, masses)
+    energy = (_chunked_energy(motion, masses) if global_pos is None
+              else kinetic_energy(_positions(motion, global_pos), motion.fps, masses))
     frames = np.round(beats * motion.fps).astype(np.int64)
     out = interval_energy(energy, np.clip(frames, 0, n), motion.fps)
     out[(frames[:-1] < 0) | (frames[1:] > n)] = np.nan
+    return out
+
+
+#: Frames of forward kinematics at a time: a 30-minute dance's positions at once were 100 MB.
+ENERGY_CHUNK = 4096
+
+
+def _chunked_energy(motion: MotionClip, masses: np.ndarray) -> np.ndarray:
+    """``kinetic_energy`` of the clip's forward kinematics, a chunk of frames at a time. Each chunk
+    is computed with one frame more on either side, so the central differences, and the result,
+    are exactly those of the whole clip at once."""
+    from ..kinematics import fk
+
+    n, sk = motion.n_frames, motion.skeleton
+    out = np.empty(n)
+    for a in range(0, n, ENERGY_CHUNK):
+        b = min(a + ENERGY_CHUNK, n)
+        lo, hi = max(a - 1, 0), min(b + 1, n)
+        local_pos = None if motion.local_pos is None else motion.local_pos[lo:hi]
+        pos = fk(motion.local_rot[lo:hi], motion.root_pos[lo:hi], sk.offsets, sk.parents, local_pos)[1]
+        out[a:b] = kinetic_energy(pos, motion.fps, masses)[a - lo:a - lo + b - a]
     return out
 
 

@@ -61,6 +61,11 @@ def write_dance(output: Path, clip, character, *, song: Path | None = None, prog
 
         render_video(clip, song, output, character=character, progress=progress)
         return
+    if suffix == ".bvh":  # block by block: a long dance's text is never whole in memory
+        from ..io.bvh_writer import write_bvh
+
+        write_bvh(output, clip)
+        return
     from ..io.files import atomic_output
 
     data = encode_dance(suffix, clip, character)

@@ -1,4 +1,4 @@
-"""A small software renderer for dance videos: numpy projection, PIL rasterisation.
+"""A small software renderer for dance videos: numpy projection and rasterisation, PIL for discs and thick lines.
 
 The scene is the dancer on a floor grid with a line every 0.5 m, seen by a perspective
 camera at a fixed elevation from a 3/4 front view. The dancer is a character's skinned
@@ -6,11 +6,14 @@ mesh (``skinned``: z-buffered, smoothly lit triangles) or a stick figure (bones 
 lines, joints as discs, a disc for the head); either casts a shadow of thick bones
 straight down onto the floor. The camera keeps its orientation for the whole clip and
 follows the root horizontally through a zero-phase Gaussian low-pass (no jitter, no
-lag); its height stays fixed so the floor does not bob. Everything is drawn at twice
-the output size (up to full HD) and box-filtered down, which anti-aliases edges.
+lag); its height stays fixed so the floor does not bob. The dancer and the shadow are
+drawn at twice the output size (up to full HD) and box-filtered down, which anti-aliases
+their edges; the grid's lines are drawn anti-aliased at the output size.
 
 Frames are produced one at a time (``FrameRenderer.frames``), with forward
 kinematics (and skinning) done in chunks, so memory does not grow with the clip's length.
+They come as RGB, or already as the Y'CbCr planes an H.264 encoder takes (``pix_fmt``), so
+that ffmpeg, running beside the renderer on the other core, only encodes.
 Y is up and lengths are metres, as everywhere in dancesynth.
 """
 
@@ -27,7 +30,7 @@ from ..errors import ModelError
 from ..kinematics import fk
 from ..motion.roles import find_roles
 from ..types import MotionClip
-from .skinned import paint
+from .skinned import rasterise
 
 SUPERSAMPLE = 2              # draw at 2x, box-filter down: cheap anti-aliasing ...
 SUPERSAMPLE_MAX_PIXELS = 1920 * 1080  # ... up to full HD; larger pictures have small enough pixels
@@ -47,6 +50,8 @@ FLOOR = (241, 240, 236)
 GRID_MINOR = (200, 200, 202)  # every 0.5 m
 GRID_MAJOR = (172, 173, 178)  # every 1 m
 SHADOW = (206, 205, 203)
+PIX_FMTS = ("rgb24", "yuv420p")
+_BT601 = np.array([[65.481, 128.553, 24.966], [-37.797, -74.203, 112.0], [112.0, -93.786, -18.214]])
 COLOURS = {"l": (40, 110, 210), "r": (226, 92, 46), "": (72, 78, 92)}
 HEAD = (96, 102, 116)
 
@@ -243,14 +248,24 @@ def _mean_facing(clip, sample, pts) -> np.ndarray:
 
 
 class FrameRenderer:
-    """Draws the frames of one clip at a given size; ``frames`` yields RGB bytes one frame at a time.
+    """Draws the frames of one clip at a given size; ``frames`` yields them one at a time as bytes.
 
     ``mesh`` (a ``skinned.SkinnedMesh`` bound to the clip's skeleton) draws the dancer as that
-    character; without it the dancer is a stick figure.
+    character; without it the dancer is a stick figure. ``pix_fmt``: what ``frames`` yields,
+    ``"rgb24"`` (packed RGB) or ``"yuv420p"`` (the planes H.264 encodes: BT.601 limited-range
+    Y'CbCr with chroma at half size, as ffmpeg would convert the RGB frame, so it has nothing to convert).
+
+    How a frame is drawn, cheaply: the floor (its grid and the dancer's shadow, all greys on one line
+    through the floor's colour) is one 8-bit channel, its luma, at the output size: the grid's lines are
+    drawn anti-aliased straight into it, the shadow at the drawing scale in its own box. The rows of sky
+    above the floor never change and are drawn once. Only the box round the dancer is drawn in colour at
+    the drawing scale, over the floor under it, and box-filtered down.
     """
 
-    def __init__(self, clip: MotionClip, width: int, height: int, mesh=None):
-        self.clip, self.width, self.height, self.mesh = clip, int(width), int(height), mesh
+    def __init__(self, clip: MotionClip, width: int, height: int, mesh=None, pix_fmt: str = "rgb24"):
+        if pix_fmt not in PIX_FMTS:
+            raise ValueError(f"pix_fmt must be one of {PIX_FMTS}, got {pix_fmt!r}")
+        self.clip, self.width, self.height, self.mesh, self.pix_fmt = clip, int(width), int(height), mesh, pix_fmt
         self.shot = plan_shot(clip, build_figure(clip.skeleton), width / height,
                               None if mesh is None else mesh.plan_points)
         # Some rigs do not stand up in their rest pose: size the bones by the dancing body.
@@ -265,8 +280,11 @@ class FrameRenderer:
         right = np.cross([0.0, 1.0, 0.0], back)
         right /= np.linalg.norm(right)
         self.basis = (right, np.cross(back, right), back)
-        self.background = self._background()
-        self.canvas = self.background.copy()  # drawn on afresh each frame: no new 6 MB image per frame
+        self._colours = _to_ycbcr if pix_fmt == "yuv420p" else (lambda rgb: np.asarray(rgb, dtype=np.float64))
+        self.shades = None
+        if mesh is not None:
+            self.shades = mesh.shades if pix_fmt == "rgb24" else _pack(self._colours(_unpack(mesh.shades)))
+        self._prepare_background()
 
     def camera(self, frame: int) -> Camera:
         tx, tz = self.shot.target_xz[frame]
@@ -275,19 +293,51 @@ class FrameRenderer:
         return Camera(target + self.shot.distance * back, right, up, back, self.focal,
                       (self.size[0] / 2, self.size[1] / 2))
 
-    def _background(self) -> Image.Image:
-        """Sky gradient above the horizon, plain floor below (the horizon row never moves)."""
-        w, h = self.size
-        horizon = h / 2 - self.focal * np.tan(np.radians(ELEVATION_DEG))
-        rows = np.arange(h, dtype=np.float64)
+    # ---------------------------------------------------------------- what does not move
+
+    def _prepare_background(self) -> None:
+        """The sky band (drawn once) and how the floor's luma turns into colours."""
+        s, w = self.supersample, self.size[0]
+        horizon = self.size[1] / 2 - self.focal * np.tan(np.radians(ELEVATION_DEG))
+        # The band: whole chroma rows (2 output rows) down to below the horizon. The floor's grid ends
+        # GRID_RADIUS_M from the dancer, far below the horizon: nothing but the dancer is drawn over the band.
+        self.band = band = int(min(self.height, max(0, 2 * np.ceil(horizon / (2 * s)))))   # output rows
+        rows = np.arange(band * s, dtype=np.float64)
         t = np.clip(rows / max(horizon, 1.0), 0.0, 1.0)[:, None]
         sky = np.array(SKY_TOP) * (1 - t) + np.array(SKY_HORIZON) * t
-        col = np.where((rows < horizon)[:, None], sky, np.array(FLOOR, dtype=np.float64))
-        img = np.broadcast_to(col[:, None, :].round().astype(np.uint8), (h, w, 3))
-        return Image.fromarray(np.ascontiguousarray(img), "RGB")
+        col = np.where((rows < horizon)[:, None], sky.round(), np.array(FLOOR, dtype=np.float64))
+        self.band_packed = np.ascontiguousarray(np.broadcast_to(_pack(self._colours(col))[:, None], (band * s, w)))
+        band_out = _reduce(_image(self.band_packed), s)
+        if self.pix_fmt == "yuv420p":
+            self.band_yuv = _planes(band_out)
+        else:
+            self.band_rgb = band_out.convert("RGB")
+
+        # The floor holds luma (BT.601, limited range); its colours lie on the line from the floor's
+        # colour to the major grid lines', so a luma value says which colour it is.
+        self.floor_y = float(_luma(FLOOR))
+        self.floor = np.full((self.height, self.width), int(round(self.floor_y)), np.uint8)
+        level = np.arange(256, dtype=np.float64)
+        along = (self.floor_y - level) / (self.floor_y - float(_luma(GRID_MAJOR)))
+        floor_rgb = np.clip(np.array(FLOOR, float) + along[:, None] * (np.array(GRID_MAJOR, float) - FLOOR), 0, 255)
+        if self.pix_fmt == "yuv420p":
+            ycc = _to_ycbcr(floor_rgb)
+            ycc[:, 0] = level  # the floor's value is the luma itself
+            self.floor_packed = _pack(ycc)
+            self.floor_uv = [np.clip(np.rint(ycc[:, k]), 0, 255).astype(np.uint8) for k in (1, 2)]
+        else:
+            self.floor_packed = _pack(floor_rgb)
+            self.floor_palette = np.rint(floor_rgb).astype(np.uint8).tobytes()
+
+    def _ink(self, rgb) -> int:
+        """An sRGB colour (3,) as a packed ink in this renderer's colour space."""
+        return int(_pack(self._colours(rgb)))
+
+    # ---------------------------------------------------------------- frames
 
     def frames(self, source_frames):
-        """Yield each frame (``source_frames``: clip frame indices) as packed RGB bytes."""
+        """Yield each frame (``source_frames``: clip frame indices) in ``pix_fmt``: ``bytes`` (rgb24), or a
+        uint8 array holding the Y, Cb and Cr planes one after the other (yuv420p; a new one each frame)."""
         source_frames = np.asarray(source_frames, dtype=np.int64)
         for start in range(0, len(source_frames), CHUNK_FRAMES):
             idx = source_frames[start:start + CHUNK_FRAMES]
@@ -297,24 +347,117 @@ class FrameRenderer:
             if self.mesh is not None:
                 posed = self.mesh.pose(g_rot, g_pos, [self.camera(int(f)) for f in idx], NEAR_M)
             for k, f in enumerate(idx):
-                yield self.draw(int(f), pts[k], posed[k]).tobytes()
+                if self.pix_fmt == "rgb24":
+                    yield self._rgb(*self._render(int(f), pts[k], posed[k], self.floor)).tobytes()
+                else:
+                    w, h = self.width, self.height
+                    frame = np.empty(w * h * 3 // 2, np.uint8)
+                    planes = [frame[:w * h].reshape(h, w), frame[w * h:w * h * 5 // 4].reshape(h // 2, w // 2),
+                              frame[w * h * 5 // 4:].reshape(h // 2, w // 2)]
+                    _, box, patch = self._render(int(f), pts[k], posed[k], planes[0])  # the floor is the Y plane
+                    self._yuv(planes, box, patch)
+                    yield frame
 
     def draw(self, frame: int, points: np.ndarray, posed=None) -> Image.Image:
-        """One frame as an image of the output size; ``points`` (P, 3) from ``figure_points``;
-        ``posed``: the mesh's frame from ``SkinnedMesh.pose`` (``None``: draw the stick figure)."""
-        cam = self.camera(frame)
-        img = self.canvas
-        img.paste(self.background)
-        d = ImageDraw.Draw(img)
-        self._draw_grid(d, cam)
-        self._draw_shadow(d, cam, points)
-        if posed is None:
-            self._draw_figure(d, cam, points)
-        else:
-            paint(img, self.mesh, posed)
-        return img.reduce(self.supersample) if self.supersample > 1 else img.copy()
+        """One frame as an RGB image of the output size (an ``rgb24`` renderer's); ``points`` (P, 3) from
+        ``figure_points``; ``posed``: the mesh's frame from ``SkinnedMesh.pose`` (``None``: the stick figure)."""
+        if self.pix_fmt != "rgb24":
+            raise ValueError("draw() makes RGB pictures: use a renderer with pix_fmt='rgb24'")
+        return self._rgb(*self._render(frame, points, posed, self.floor))
 
-    def _draw_grid(self, d, cam: Camera) -> None:
+    def _render(self, frame: int, points: np.ndarray, posed, floor: np.ndarray):
+        """Draw the frame's floor into ``floor`` (output size, luma; above the band: left as it is); return
+        it, the dancer's box (output pixels) and the dancer's picture there (RGBX, this colour space)."""
+        cam = self.camera(frame)
+        floor[self.band:] = int(round(self.floor_y))
+        self._draw_grid(floor, cam)
+        self._draw_shadow(floor, cam, points)
+        box = self._figure_box(cam, points) if posed is None else self._mesh_box(posed)
+        if box is None:
+            return floor, None, None
+        canvas = self._underlay(box, floor)
+        if posed is None:
+            img = _image(canvas)
+            self._draw_figure(ImageDraw.Draw(img), cam, points, box[:2])
+        else:
+            rasterise(canvas, self.mesh, posed, self.shades, box[:2])
+            img = _image(canvas)
+        s = self.supersample
+        return floor, tuple(v // s for v in box), _reduce(img, s)
+
+    def _rgb(self, floor: np.ndarray, box, patch) -> Image.Image:
+        img = Image.frombuffer("L", (self.width, self.height), floor, "raw", "L", 0, 1)
+        img = img.copy()
+        img.putpalette(self.floor_palette, "RGB")
+        img = img.convert("RGB")
+        if self.band:
+            img.paste(self.band_rgb, (0, 0))
+        if patch is not None:
+            img.paste(patch.convert("RGB"), box[:2])
+        return img
+
+    def _yuv(self, planes: list[np.ndarray], box, patch) -> None:
+        """Fill in the planes of a frame (Y, Cb, Cr) whose Y plane holds the floor drawn by ``_render``."""
+        y = np.ascontiguousarray(planes[0])
+        quarter = np.asarray(Image.frombuffer("L", (self.width, self.height), y, "raw", "L", 0, 1).reduce(2))
+        for plane, lut in zip(planes[1:], self.floor_uv):
+            np.take(lut, quarter, out=plane)
+        if self.band:
+            for plane, band in zip(planes, self.band_yuv):
+                plane[:len(band)] = band
+        if patch is not None:
+            x0, y0 = box[0], box[1]
+            for k, part in enumerate(_planes(patch)):
+                d = 1 if k == 0 else 2
+                planes[k][y0 // d:y0 // d + part.shape[0], x0 // d:x0 // d + part.shape[1]] = part
+
+    # ---------------------------------------------------------------- the dancer's box
+
+    def _align(self, x0, y0, x1, y1):
+        """A box (drawing pixels) grown to whole chroma pixels and cut to the picture; None if empty."""
+        a = 2 * self.supersample
+        w, h = self.size
+        box = (max(0, int(np.floor(x0 / a)) * a), max(0, int(np.floor(y0 / a)) * a),
+               min(w, int(np.ceil(x1 / a)) * a), min(h, int(np.ceil(y1 / a)) * a))
+        return box if box[2] > box[0] and box[3] > box[1] else None
+
+    def _mesh_box(self, posed):
+        if self.mesh is None:
+            return None
+        u, v = posed[0], posed[1]
+        ok = np.isfinite(u) & np.isfinite(v)
+        if not ok.any():
+            return None
+        u, v = u[ok], v[ok]
+        return self._align(float(u.min()) - 1, float(v.min()) - 1, float(u.max()) + 2, float(v.max()) + 2)
+
+    def _figure_box(self, cam: Camera, points: np.ndarray):
+        c = cam.to_camera(points)
+        if np.any(c[:, 2] < NEAR_M):
+            return None
+        uv = cam.to_pixels(c)
+        fig = self.fig
+        biggest = max(float(fig.bone_radius.max(initial=0.0)), float(fig.joint_radius.max(initial=0.0)),
+                      fig.head_radius)
+        r = 1.2 * biggest * self.focal / float(c[:, 2].min()) + 2
+        return self._align(uv[:, 0].min() - r, uv[:, 1].min() - r, uv[:, 0].max() + r, uv[:, 1].max() + r)
+
+    def _underlay(self, box, floor: np.ndarray) -> np.ndarray:
+        """What is drawn under a box (drawing pixels, aligned): packed colours (H, W) uint32, sky and ``floor``."""
+        s = self.supersample
+        x0, y0, x1, y1 = box
+        out = np.empty((y1 - y0, x1 - x0), np.uint32)
+        split = min(max(self.band * s, y0), y1)
+        if split > y0:
+            out[:split - y0] = self.band_packed[y0:split, x0:x1]
+        if y1 > split:
+            out[split - y0:] = _upsample(np.take(self.floor_packed, floor[split // s:y1 // s, x0 // s:x1 // s]), s)
+        return out
+
+    # ---------------------------------------------------------------- drawing
+
+    def _draw_grid(self, floor: np.ndarray, cam: Camera) -> None:
+        """The floor's grid, lines a pixel wide, anti-aliased, into the floor (output size, luma)."""
         step, radius = GRID_STEP_M, GRID_RADIUS_M
         target = cam.position - self.shot.distance * cam.back
         tx, tz = target[0], target[2]
@@ -340,36 +483,51 @@ class FrameRenderer:
         keep = alpha > 0.02
         c0, c1 = _clip_near(cam.to_camera(p0[keep]), cam.to_camera(p1[keep]))
         ok = np.isfinite(c0[:, 0])
-        uv0, uv1 = cam.to_pixels(c0[ok]), cam.to_pixels(c1[ok])
+        s = self.supersample
+        uv0, uv1 = cam.to_pixels(c0[ok]) / s, cam.to_pixels(c1[ok]) / s
         alpha, major = alpha[keep][ok], major[keep][ok]
-        floor = np.array(FLOOR, dtype=np.float64)
-        lines = np.where(major[:, None], np.array(GRID_MAJOR, float), np.array(GRID_MINOR, float))
-        cols = np.rint(floor + alpha[:, None] * (lines - floor)).astype(np.int64)
-        inks = cols[:, 0] | cols[:, 1] << 8 | cols[:, 2] << 16  # packed RGB: PIL takes it as is, no tuples
-        width, line = self.supersample, d.line
-        for xy, ink in zip(np.concatenate([uv0, uv1], axis=1).tolist(), inks.tolist()):
-            line(xy, fill=ink, width=width)
+        # Each line darkens the floor's luma by its own colour's, faded into the floor's.
+        lines = np.where(major, float(_luma(GRID_MAJOR)), float(_luma(GRID_MINOR)))
+        _smooth_lines(floor, uv0, uv1, alpha * (self.floor_y - lines), self.floor_y)
 
-    def _draw_shadow(self, d, cam: Camera, points: np.ndarray) -> None:
+    def _draw_shadow(self, floor: np.ndarray, cam: Camera, points: np.ndarray) -> None:
+        """The shadow (thick bones straight down on the floor), drawn at the drawing scale in its box."""
         flat = points.copy()
         flat[:, 1] = self.shot.floor_y
         c = cam.to_camera(flat)
         if np.any(c[:, 2] < NEAR_M):
             return
-        uv = cam.to_pixels(c).tolist()
+        uv = cam.to_pixels(c)
         px = self.focal / c[:, 2]
-        for (a, b), r in zip(self.shadow_bones.tolist(), self.shadow_radius.tolist()):
+        bones, radius = self.shadow_bones, self.shadow_radius
+        if len(bones) == 0:
+            return
+        reach = float((np.maximum(1.0, 2 * radius * px[bones[:, 1]]) / 2).max()) + 2
+        box = self._align(uv[:, 0].min() - reach, uv[:, 1].min() - reach, uv[:, 0].max() + reach,
+                          uv[:, 1].max() + reach)
+        if box is None:
+            return
+        s = self.supersample
+        x0, y0, x1, y1 = (v // s for v in box)
+        under = floor[y0:y1, x0:x1]
+        img = Image.fromarray(_upsample(under, s))
+        d = ImageDraw.Draw(img)
+        uv = (uv - box[:2]).tolist()
+        ink = int(round(float(_luma(SHADOW))))  # into the floor, as luma
+        for (a, b), r in zip(bones.tolist(), radius.tolist()):
             w = max(1.0, 2 * r * px[b])
-            d.line((*uv[a], *uv[b]), fill=SHADOW, width=int(round(w)))
-            _disc(d, uv[b], w / 2, SHADOW)
+            d.line((*uv[a], *uv[b]), fill=ink, width=int(round(w)))
+            _disc(d, uv[b], w / 2, ink)
+        under[:] = np.asarray(_reduce(img, s))
 
-    def _draw_figure(self, d, cam: Camera, points: np.ndarray) -> None:
+    def _draw_figure(self, d, cam: Camera, points: np.ndarray, offset=(0, 0)) -> None:
+        """The stick figure, into the dancer's box whose top left corner is at ``offset`` (drawing pixels)."""
         fig = self.fig
         c = cam.to_camera(points)
         depth = c[:, 2]
         if np.any(depth < NEAR_M):
             return
-        uv = cam.to_pixels(c)
+        uv = cam.to_pixels(c) - offset
         px = self.focal / depth
         bg = np.array(FLOOR, dtype=np.float64)
         root_depth = depth[0]
@@ -390,18 +548,18 @@ class FrameRenderer:
             if kind == 0:
                 pa, pb = int(a[i]), int(b[i])
                 f = (fade[pa] + fade[pb]) / 2
-                col = _rgb(fig.bone_colour[i] * (1 - f) + bg * f)
+                col = self._ink(fig.bone_colour[i] * (1 - f) + bg * f)
                 w = max(1.0, 2 * fig.bone_radius[i] * (px[pa] + px[pb]) / 2)
                 d.line((*uvl[pa], *uvl[pb]), fill=col, width=int(round(w)))
                 _disc(d, uvl[pa], w / 2, col)
                 _disc(d, uvl[pb], w / 2, col)
             elif kind == 1:
-                col = _rgb(fig.joint_colour[i] * (1 - fade[i]) + bg * fade[i])
+                col = self._ink(fig.joint_colour[i] * (1 - fade[i]) + bg * fade[i])
                 _disc(d, uvl[i], fig.joint_radius[i] * px[i], col)
             else:
-                (u, v), = cam.to_pixels(head_c[None]).tolist()
+                (u, v), = (cam.to_pixels(head_c[None]) - offset).tolist()
                 f = 0.35 * np.clip((head_c[2] - root_depth) / (0.5 * self.shot.body_height), 0.0, 1.0)
-                col = _rgb(np.array(HEAD, float) * (1 - f) + bg * f)
+                col = self._ink(np.array(HEAD, float) * (1 - f) + bg * f)
                 _disc(d, (u, v), fig.head_radius * self.focal / head_c[2], col)
 
 
@@ -416,9 +574,112 @@ def _mesh_shadow(mesh, fig: Figure, skeleton) -> tuple[np.ndarray, np.ndarray]:
     return bones[keep], radius[keep]
 
 
-def _rgb(c) -> tuple[int, int, int]:
-    r, g, b = np.rint(c).astype(int).tolist()
-    return (r, g, b)
+def _to_ycbcr(rgb) -> np.ndarray:
+    """BT.601 limited-range Y'CbCr (..., 3) of 8-bit sRGB colours (..., 3), as ffmpeg converts RGB for H.264."""
+    rgb = np.asarray(rgb, dtype=np.float64)
+    return np.array([16.0, 128.0, 128.0]) + rgb @ (_BT601.T / 255.0)
+
+
+def _luma(rgb) -> np.ndarray:
+    return _to_ycbcr(rgb)[..., 0]
+
+
+def _pack(c) -> np.ndarray:
+    """8-bit colours (..., 3) (rounded, clipped) packed in uint32, the first channel in the low byte (PIL's RGBX)."""
+    c = np.clip(np.rint(c), 0, 255).astype(np.uint32)
+    return c[..., 0] | c[..., 1] << 8 | c[..., 2] << 16
+
+
+def _unpack(packed: np.ndarray) -> np.ndarray:
+    return np.stack([packed & 255, packed >> 8 & 255, packed >> 16 & 255], axis=-1).astype(np.float64)
+
+
+def _image(packed: np.ndarray) -> Image.Image:
+    """An RGBX image over packed colours (H, W) uint32 (no copy; drawing on it copies)."""
+    return Image.frombuffer("RGBX", (packed.shape[1], packed.shape[0]), packed, "raw", "RGBX", 0, 1)
+
+
+def _reduce(img: Image.Image, factor: int) -> Image.Image:
+    """Box-filtered down by ``factor`` (the drawing scale to the output's)."""
+    return img.reduce(factor) if factor > 1 else img.copy()
+
+
+_WIDER = {np.dtype(np.uint8): (np.uint16, 0x0101), np.dtype(np.uint32): (np.uint64, 0x100000001)}
+
+
+def _upsample(a: np.ndarray, factor: int) -> np.ndarray:
+    """Each pixel of ``a`` (H, W) as a factor x factor block."""
+    if factor == 1:
+        return a.copy()
+    if factor != 2 or a.dtype not in _WIDER:
+        return a.repeat(factor, axis=0).repeat(factor, axis=1)
+    # Twice as wide: each pixel twice in a number of twice its size (4x faster than np.repeat), then each row twice.
+    wide, twice = _WIDER[a.dtype]
+    row = (a.astype(wide) * wide(twice)).view(a.dtype).reshape(a.shape[0], 2 * a.shape[1])
+    out = np.empty((2 * a.shape[0], 2 * a.shape[1]), a.dtype)
+    out[0::2] = row
+    out[1::2] = row
+    return out
+
+
+def _planes(img: Image.Image) -> list[np.ndarray]:
+    """The Y, Cb and Cr planes (uint8 arrays; Cb and Cr box-filtered to half size) of a Y'CbCr picture held
+    in an RGBX image of even size."""
+    half = img.reduce(2)
+    return [np.asarray(img.getchannel(0)), np.asarray(half.getchannel(1)), np.asarray(half.getchannel(2))]
+
+
+def _smooth_lines(img: np.ndarray, p0: np.ndarray, p1: np.ndarray, depth: np.ndarray, base: float) -> None:
+    """Anti-aliased lines, one pixel wide, from ``p0`` to ``p1`` (N, 2) pixels, into the luma image ``img``:
+    each darkens the pixels it covers from ``base`` by up to ``depth`` (N,), in proportion to the part of
+    each pixel it covers (a box filter); where lines cross, the darker wins."""
+    h, w = img.shape
+    steep = np.abs(p1[:, 1] - p0[:, 1]) > np.abs(p1[:, 0] - p0[:, 0])
+    for group, (ia, ib), strides, extents in (((~steep), (0, 1), (1, w), (w, h)), (steep, (1, 0), (w, 1), (h, w))):
+        _lines_along(img.reshape(-1), p0[group, ia], p1[group, ia], p0[group, ib], p1[group, ib], depth[group],
+                     base, strides, extents)
+
+
+def _lines_along(flat: np.ndarray, a0, a1, b0, b1, depth, base: float, strides, extents) -> None:
+    """``_smooth_lines`` of lines from (a0, b0) to (a1, b1) that run along a (x, or y for steep lines), with
+    |slope| <= 1: one sample per pixel along a; across (b), the pixels the line's cross-section covers (a line
+    1 pixel wide spans sqrt(1 + slope^2) pixels, so at most 3). ``strides``: a's and b's in ``flat``."""
+    flip = a1 < a0
+    a0, a1, b0, b1 = np.where(flip, a1, a0), np.where(flip, a0, a1), np.where(flip, b1, b0), np.where(flip, b0, b1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = np.where(a1 - a0 > 1e-9, (b1 - b0) / (a1 - a0), 0.0)
+    # Only where the line is on the picture: a within it, and b within it (give or take 2 pixels).
+    with np.errstate(divide="ignore", invalid="ignore"):
+        enter, leave = (a0 + (edge - b0) / slope for edge in (-2.0, extents[1] + 2.0))
+    inside = (b0 >= -2) & (b0 <= extents[1] + 2)
+    start = np.where(slope > 0, enter, np.where(slope < 0, leave, np.where(inside, a0, np.inf)))
+    stop = np.where(slope > 0, leave, np.where(slope < 0, enter, np.where(inside, a1, -np.inf)))
+    first = np.clip(np.ceil(np.maximum(a0, start) - 0.5), 0, extents[0])
+    n = np.maximum(np.clip(np.ceil(np.minimum(a1, stop) - 0.5), 0, extents[0]) - first, 0).astype(np.int64)
+    total = int(n.sum())
+    if total == 0:
+        return
+    # One record per line, spread over its samples by a single np.repeat.
+    record = np.stack([np.cumsum(n) - n, first, b0 + (first + 0.5 - a0) * slope, slope,
+                       0.5 * np.sqrt(1.0 + slope * slope), depth], axis=1)
+    r = np.repeat(record.astype(np.float32), n, axis=0).T.copy()   # (6, samples)
+    k = np.arange(total, dtype=np.float32) - r[0]
+    b = r[2] + k * r[3]
+    lo, hi = b - r[4], b + r[4]
+    along = (r[1] + k) * strides[0]                                   # exact in float32 up to 4K pictures
+    pixel = np.floor(lo)
+    at = np.empty((3, total), np.int64)
+    value = np.empty((3, total), np.uint8)
+    for j in range(3):  # the pixels across, each as whole rows of 1-D work (broadcasting (3, n) is slow)
+        cover = np.minimum(hi, pixel + 1)
+        cover -= np.maximum(lo, pixel)
+        np.clip(cover, 0, 1, out=cover)
+        darker = np.rint(base - cover * r[5])
+        darker[(pixel < 0) | (pixel >= extents[1])] = 255          # off the picture: leaves it as it is
+        value[j] = darker
+        at[j] = along + np.clip(pixel, 0, extents[1] - 1) * strides[1]
+        pixel += 1
+    np.minimum.at(flat, at.ravel(), value.ravel())
 
 
 def _disc(d, centre, r: float, fill) -> None:

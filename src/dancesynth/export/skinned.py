@@ -11,15 +11,16 @@ step runs over contiguous memory), Lambert lighting of every vertex (a key light
 weaker fill and a sky/ground ambient, placed by the camera's orientation, which is
 fixed for the clip) and projection.
 
-``paint`` then draws one frame into the renderer's (supersampled) PIL image: the
-triangles facing the camera (back faces are culled) are cut into pixel runs along
-each row, every pixel gets
-its depth (1/z, which is linear on the screen) and light interpolated from the
-corners, a z-buffer keeps the nearest (``np.maximum.at``), and the winners are coloured
-albedo x light in sRGB. A z-buffer, unlike the painter's algorithm, has no ordering
+``rasterise`` then draws one frame into a canvas of packed colours (the renderer's box round
+the dancer, at its supersampled scale): the triangles facing the camera (back faces are
+culled) are cut into two trapezoids each and those into pixel runs along each row, every
+pixel gets its depth (1/z, which is linear on the screen) and light interpolated from the
+corners, and a z-buffer keeps the nearest: one ``np.maximum.at`` over keys that hold the
+depth's bits above the pixel's colour (albedo x light, looked up in a table of sRGB, or of
+another colour space's, values). A z-buffer, unlike the painter's algorithm, has no ordering
 errors to flicker where limbs cross or where the parts of a body that overlap (an arm's
 ball inside the shoulder, a body under its clothes) meet; interpolating the light
-(Gouraud) hides the facets.
+(Gouraud) hides the facets. ``paint`` does the same into a PIL image.
 
 The shadow is the stick figure's (thick bones projected onto the floor), each bone as
 thick as the mesh around it (``shadow_radii``).
@@ -191,80 +192,151 @@ class SkinnedMesh:
 
 def paint(img: Image.Image, mesh: SkinnedMesh, posed) -> None:
     """Draw one frame of ``mesh`` (``posed``: its entry from ``SkinnedMesh.pose``) into the RGB image ``img``."""
+    canvas = np.frombuffer(img.convert("RGBX").tobytes(), np.uint32).reshape(img.height, img.width).copy()
+    if rasterise(canvas, mesh, posed):
+        img.paste(Image.frombuffer("RGBX", img.size, canvas, "raw", "RGBX", 0, 1).convert(img.mode))
+
+
+def rasterise(canvas: np.ndarray, mesh: SkinnedMesh, posed, shades: np.ndarray | None = None,
+              offset: tuple[float, float] = (0.0, 0.0)) -> bool:
+    """Draw one frame of ``mesh`` into ``canvas`` (H, W) uint32 of packed colours (red, or Y, in
+    the low byte); ``posed``: its entry from ``SkinnedMesh.pose``, whose pixel (x, y) is the canvas's
+    (x - offset[0], y - offset[1]); ``shades``: the colour table (default ``mesh.shades``, sRGB; another colour
+    space's, e.g. Y'CbCr, for the same colours and light levels). Returns False if nothing was drawn.
+
+    Every step works on whole arrays, per triangle, per run of pixels or per pixel; per-run values are
+    spread over their pixels with ``np.repeat`` (a sequential copy) rather than gathered by index."""
+    shades = mesh.shades if shades is None else shades
     u, v, w, light = posed
-    x, y = u[mesh.corners].astype(np.float64), v[mesh.corners].astype(np.float64)   # (3, T) each
+    height, width = canvas.shape
+    x = u[mesh.corners].astype(np.float64) - offset[0]                                  # (3, T) each
+    y = v[mesh.corners].astype(np.float64) - offset[1]
     # Counter-clockwise as seen from outside: a negative signed area in (y-down) pixels faces us (a
-    # triangle with a corner nearer than the near plane has NaNs: no area).
-    shown = np.flatnonzero((x[1] - x[0]) * (y[2] - y[0]) - (y[1] - y[0]) * (x[2] - x[0]) < 0)
-    tri, x, y = mesh.corners[:, shown], x[:, shown], y[:, shown]
-    # The rows whose pixel centres (+0.5) each triangle spans, inside the image.
-    top = np.maximum(np.ceil(y.min(axis=0) - 0.5), 0).astype(np.int64)
-    rows = np.maximum(np.minimum(np.floor(y.max(axis=0) - 0.5), img.height - 1).astype(np.int64) - top + 1, 0)
+    # triangle with a corner nearer than the near plane has NaNs: no area). Triangles off the canvas go too.
+    with np.errstate(invalid="ignore"):
+        shown = np.flatnonzero(((x[1] - x[0]) * (y[2] - y[0]) - (y[1] - y[0]) * (x[2] - x[0]) < 0)
+                               & (x.max(axis=0) >= 0.5) & (x.min(axis=0) <= width - 0.5)
+                               & (y.max(axis=0) >= 0.5) & (y.min(axis=0) <= height - 0.5))
+    if len(shown) == 0:
+        return False
+    x, y = x[:, shown], y[:, shown]
+    tri = mesh.corners[:, shown]
+    # Depth (1/z: linear on the screen) and light are planes over each triangle through its corners' values;
+    # light is kept in steps of the shade table.
+    depth_plane, light_plane = _planes(x, y, w[tri], light[tri] * np.float32((LIGHT_LEVELS - 1) / MAX_LIGHT))
+    base = mesh.colour[shown] * LIGHT_LEVELS
 
-    # One run of pixels per (triangle, row): where the row's centre line is inside all three edges.
-    # Front faces run counter-clockwise as seen, so each edge k -> k+1 has the inside on its left:
-    # x >= the edge where it runs down the picture, x <= the edge where it runs up; a level edge lies
-    # on the first or last row's boundary and bounds nothing.
-    t = np.repeat(np.arange(len(shown)), rows)
-    yc = top[t] + np.arange(len(t)) - np.repeat(np.cumsum(rows) - rows, rows) + 0.5
-    lo, hi = np.full(len(t), -np.inf), np.full(len(t), np.inf)
-    for k in range(3):
-        dy = y[(k + 1) % 3] - y[k]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            slope = np.where(dy != 0, (x[(k + 1) % 3] - x[k]) / dy, 0.0)
-        bound = (x[k] - slope * y[k])[t] + slope[t] * yc
-        down = dy[t]
-        lo = np.where(down > 0, np.maximum(lo, bound), lo)
-        hi = np.where(down < 0, np.minimum(hi, bound), hi)
-    first = np.maximum(np.ceil(lo - 0.5), 0)
-    count = np.maximum(np.minimum(np.floor(hi - 0.5), img.width - 1) - first + 1, 0).astype(np.int64)
-    run = np.repeat(np.arange(len(t)), count)
-    if len(run) == 0:
-        return
+    # Each triangle is two trapezoids, split at its middle corner's height, each bounded by one edge on
+    # either side: the long edge (top to bottom corner) and a short one. A pixel is inside where its
+    # centre (+0.5) is, edges included, so triangles that share an edge leave no crack between them.
+    n = len(shown)
+    top, bottom = y.argmin(axis=0), y.argmax(axis=0)  # (a level triangle, whose top is its bottom, has no area)
+    corner = (top, 3 - top - bottom, bottom)
+    span = np.arange(n)
+    (x0, x1, x2), (y0, y1, y2) = ([a[k, span] for k in corner] for a in (x, y))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        long_slope = np.where(y2 > y0, (x2 - x0) / (y2 - y0), 0.0)
+        up_slope = np.where(y1 > y0, (x1 - x0) / (y1 - y0), 0.0)
+        down_slope = np.where(y2 > y1, (x2 - x1) / (y2 - y1), 0.0)
+    long_left = x0 + long_slope * (y1 - y0) < x1  # the long edge bounds the trapezoids on the left
+    first_row = np.maximum(np.ceil(y0 - 0.5), 0)
+    end_row = np.maximum(np.minimum(np.floor(y2 - 0.5), height - 1) + 1, first_row)
+    mid_row = np.clip(np.ceil(y1 - 0.5), first_row, end_row)
+    # The upper trapezoids, then the lower ones, each as one record: where its runs start, its first row,
+    # its left and right edges' x at that row's centre and their steps per row, and its triangle's depth
+    # and light at the row's x = 0 and their steps per row and per column; its colour.
+    trapezoid = np.empty((2, n, 13))
+    trapezoid[0, :, 1], trapezoid[1, :, 1] = first_row, mid_row
+    rows = np.stack([mid_row - first_row, end_row - mid_row]).astype(np.int64)
+    yc = trapezoid[:, :, 1] + 0.5                                                       # (2, T) each
+    long_x = x0 + long_slope * (yc - y0)
+    short_x = np.stack([x0 + up_slope * (yc[0] - y0), x1 + down_slope * (yc[1] - y1)])
+    short_step = np.stack([up_slope, down_slope])
+    trapezoid[:, :, 2] = np.where(long_left, long_x, short_x)
+    trapezoid[:, :, 3] = np.where(long_left, long_slope, short_step)
+    trapezoid[:, :, 4] = np.where(long_left, short_x, long_x)
+    trapezoid[:, :, 5] = np.where(long_left, short_step, long_slope)
+    (c, gx, gy), (lc, lgx, lgy) = depth_plane, light_plane
+    trapezoid[:, :, 6] = c + gy * yc
+    trapezoid[:, :, 7] = gy
+    trapezoid[:, :, 8] = gx
+    trapezoid[:, :, 9] = lc + lgy * yc + 0.5  # + 0.5: truncating the shade rounds the light
+    trapezoid[:, :, 10] = lgy
+    trapezoid[:, :, 11] = lgx
+    trapezoid[:, :, 12] = base
+    trapezoid, rows = trapezoid.reshape(-1, 13), rows.reshape(-1)
+    trapezoid[:, 0] = np.cumsum(rows) - rows
 
-    # Depth (1/z: linear on the screen) and light at each pixel, from each triangle's plane through its
-    # corners' values: found at each run's first pixel, then stepped along it.
-    step = np.arange(len(run)) - np.repeat(np.cumsum(count) - count, count)
-    px = first.astype(np.int64)[run] + step
-    py = (yc[run] - 0.5).astype(np.int64)
-    along = step.astype(np.float32)
-    depth = _along_runs(_plane(x, y, w[tri]), t, first + 0.5, yc, run, along)
-    lit = _along_runs(_plane(x, y, light[tri]), t, first + 0.5, yc, run, along)
+    # One run of pixels per (trapezoid, row): a single np.repeat spreads the records over them.
+    r = np.repeat(trapezoid, rows, axis=0)
+    down = np.arange(len(r)) - r[:, 0]
+    row = r[:, 1] + down
+    first = np.maximum(np.ceil(r[:, 2] + r[:, 3] * down - 0.5), 0)
+    count = (np.minimum(np.floor(r[:, 4] + r[:, 5] * down - 0.5), width - 1) - first + 1).astype(np.int64)
+    np.maximum(count, 0, out=count)
+    total = int(count.sum())
+    if total == 0:
+        return False
+    # The z-buffer spans the rows and columns the triangles do, in the canvas.
+    top, bottom = int(first_row.min()), int(end_row.max())
+    left, right = max(0, int(np.floor(x.min())) - 1), min(width, int(np.ceil(x.max())) + 1)
+    span = right - left
+    xc = first + 0.5
+    # One record per run (int32 and float32 side by side), spread over its pixels by a single np.repeat.
+    start = np.cumsum(count) - count
+    record = np.empty((len(count), 8), np.int32)
+    record[:, 0] = start
+    record[:, 1] = (row - top) * span + (first - left) - start
+    values = record.view(np.float32)
+    values[:, 3] = r[:, 6] + r[:, 7] * down + r[:, 8] * xc
+    values[:, 4] = r[:, 8]
+    # The shade: the colour's row of the table plus the light, kept within the table along the whole run
+    # (interpolated light leaves its corners' range only by rounding, at the edges).
+    lit0 = np.clip(r[:, 9] + r[:, 10] * down + r[:, 11] * xc, 0, LIGHT_LEVELS - 1)
+    lit1 = np.clip(lit0 + r[:, 11] * np.maximum(count - 1, 0), 0, LIGHT_LEVELS - 1)
+    values[:, 5] = r[:, 12] + lit0
+    values[:, 6] = (lit1 - lit0) / np.maximum(count - 1, 1)
 
-    # Z-buffer over the box the pixels span: the nearest (largest 1/z) wins each pixel.
-    bx0, by0 = int(px.min()), int(py.min())
-    bw, bh = int(px.max()) - bx0 + 1, int(py.max()) - by0 + 1
-    at = (py - by0) * bw + (px - bx0)
-    nearest = np.full(bw * bh, -np.inf, np.float32)
-    np.maximum.at(nearest, at, depth)
-    win = depth >= nearest[at]
-    level = np.clip(lit[win] * ((LIGHT_LEVELS - 1) / MAX_LIGHT) + 0.5, 0, LIGHT_LEVELS - 1).astype(np.int32)
-    colour = mesh.colour[shown][t][run[win]]
-    # Paste the box's covered pixels over what is drawn already (the floor, the grid, the shadow).
-    at = at[win]
-    patch, cover = np.zeros(bw * bh, np.uint32), np.zeros(bw * bh, np.uint8)
-    patch[at], cover[at] = mesh.shades[colour * LIGHT_LEVELS + level], 255
-    img.paste(Image.frombuffer("RGB", (bw, bh), patch, "raw", "RGBX", 0, 1), (bx0, by0, bx0 + bw, by0 + bh),
-              Image.frombuffer("L", (bw, bh), cover, "raw", "L", 0, 1))
+    # Every pixel of every run: its place in the z-buffer, its depth and its shade.
+    pixels = np.repeat(record, count, axis=0)
+    values = pixels.view(np.float32)
+    index = np.arange(total, dtype=np.int32)  # one dtype throughout: mixed ones make numpy convert in chunks
+    at = index + pixels[:, 1]
+    along = index - pixels[:, 0]
+    along = along.astype(np.float32)
+    depth = values[:, 4] * along
+    depth += values[:, 3]
+    np.maximum(depth, np.float32(0), out=depth)
+    shade = values[:, 6] * along
+    shade += values[:, 5]
+    shade = shade.astype(np.int32)
+
+    # The z-buffer: each pixel's key is its depth's bits (a positive float32's order is its bits' order)
+    # over its colour, so the largest key is the nearest surface's colour. What is drawn already has depth 0.
+    key = depth.view(np.uint32).astype(np.uint64)
+    key <<= np.uint64(32)
+    key |= np.take(shades, shade)
+    drawn = canvas[top:bottom, left:right]
+    nearest = drawn.astype(np.uint64)
+    np.maximum.at(nearest.reshape(-1), at, key)
+    np.copyto(drawn, nearest, casting="unsafe")  # the low 32 bits: the colour
+    return True
 
 
-def _plane(x: np.ndarray, y: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(c, gx, gy)`` per triangle with a = c + gx X + gy Y through its corners' values ``a`` (3, T)."""
+def _planes(x: np.ndarray, y: np.ndarray, *values: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """``(c, gx, gy)`` per triangle with a = c + gx X + gy Y through its corners' values ``a`` (3, T),
+    for each of ``values``."""
     dx1, dy1, dx2, dy2 = x[1] - x[0], y[1] - y[0], x[2] - x[0], y[2] - y[0]
-    da1, da2 = a[1] - a[0], a[2] - a[0]
     det = dx1 * dy2 - dx2 * dy1
     det = np.where(np.abs(det) < 1e-9, -1e-9, det)  # a sliver: it covers no pixel centre anyway
-    gx = (da1 * dy2 - da2 * dy1) / det
-    gy = (da2 * dx1 - da1 * dx2) / det
-    return a[0] - gx * x[0] - gy * y[0], gx, gy
-
-
-def _along_runs(plane, t, x0, y, run, step) -> np.ndarray:
-    """Values (float32) on each run's triangle's ``plane``: at ``x0, y`` (per run), plus ``step`` pixels."""
-    c, gx, gy = plane
-    start = (c[t] + gx[t] * x0 + gy[t] * y).astype(np.float32)
-    slope = gx[t].astype(np.float32)
-    return start[run] + slope[run] * step
+    dx1, dy1, dx2, dy2 = dx1 / det, dy1 / det, dx2 / det, dy2 / det
+    planes = []
+    for a in values:
+        da1, da2 = a[1] - a[0], a[2] - a[0]
+        gx = da1 * dy2 - da2 * dy1
+        gy = da2 * dx1 - da1 * dx2
+        planes.append((a[0] - gx * x[0] - gy * y[0], gx, gy))
+    return planes
 
 
 def _along(vectors: np.ndarray, axis) -> np.ndarray:

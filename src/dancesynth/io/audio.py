@@ -40,8 +40,9 @@ _CONVERT_HINT = "convert it to wav, flac, ogg or mp3 (e.g. `ffmpeg -i IN out.wav
 # called truncated: encoders disagree by a frame or two of priming/padding samples.
 _SHORTFALL_TOLERANCE_S = 0.25
 _SHORTFALL_TOLERANCE_FRACTION = 0.005
-# Decode in blocks so a long stereo file is down-mixed as it is read.
-_BLOCK_FRAMES = 1 << 18
+# Decode in blocks so a long stereo file is down-mixed and resampled as it is read (small
+# enough to stay in cache: 2**18-frame blocks cost twice the read itself).
+_BLOCK_FRAMES = 1 << 16
 # ffmpeg/ffprobe must never hang the caller; a 15-minute song decodes in seconds.
 _FFPROBE_TIMEOUT_S = 30.0
 _FFMPEG_TIMEOUT_S = 300.0
@@ -118,6 +119,11 @@ def load_audio(path, *, sr: int | None = DEFAULT_SR, mono: bool = True,
     -------
     (y, sr) : the samples and their sample rate.
 
+    The file is decoded, down-mixed and resampled block by block (soxr's stream
+    resampler gives the same samples as resampling the whole signal at once) into
+    one array of the output's length: the memory is that of the result, however
+    long the song, and the time about one read of the file.
+
     Raises ``InputError`` (one line, naming the file) when the file is missing, a
     folder, empty, not audio, truncated or corrupt, too long or too short.
     """
@@ -125,22 +131,22 @@ def load_audio(path, *, sr: int | None = DEFAULT_SR, mono: bool = True,
         raise InputError(f"sample rate must be a positive integer, got {sr!r}")
     info = probe_audio(path)
     _check_duration(info.path, info.duration_s, max_duration_s, min_duration_s)
+    out_sr = info.samplerate if sr is None else int(sr)
+    sink = _Sink(info.samplerate, out_sr, 1 if mono else info.channels, info.frames)
     if info.backend == "soundfile":
-        y = _decode_soundfile(info, mono)
+        _decode_soundfile(info, mono, sink)
     else:
-        y = _decode_ffmpeg(info, mono, max_duration_s)
-    n = y.shape[-1]
+        _decode_ffmpeg(info, mono, max_duration_s, sink)
+    y = sink.finish()
+    n = sink.frames_in
     _check_not_truncated(info, n)
     # Again on what was decoded: a header may not state the length, or understate it.
     _check_duration(info.path, n / info.samplerate, max_duration_s, min_duration_s)
-    out_sr = info.samplerate if sr is None else int(sr)
-    if out_sr != info.samplerate:
-        y = resample(y, info.samplerate, out_sr)
-    # After resampling: float samples near 3e38 are finite in the file but overflow the resampler.
-    if not np.all(np.isfinite(y)):
+    # Checked on the resampled blocks: float samples near 3e38 are finite in the file but overflow the resampler.
+    if not sink.finite:
         raise InputError(f"{info.path}: the audio contains NaN, infinite or absurdly large samples, so the file is "
                          f"corrupt; re-export or {_CONVERT_HINT}")
-    return np.ascontiguousarray(y, dtype=np.float32), out_sr
+    return (y[0] if mono else y), out_sr
 
 
 def resample(y: np.ndarray, sr_in: int, sr_out: int) -> np.ndarray:
@@ -153,6 +159,84 @@ def resample(y: np.ndarray, sr_in: int, sr_out: int) -> np.ndarray:
         return soxr.resample(y, sr_in, sr_out, quality="HQ").astype(np.float32, copy=False)
     # soxr wants (frames, channels).
     return soxr.resample(y.T, sr_in, sr_out, quality="HQ").T.astype(np.float32, copy=False)
+
+
+def resample_blocks(blocks, sr_in: int, sr_out: int):
+    """Resample mono float32 blocks as one signal: yields the output in blocks.
+
+    soxr's stream resampler: the concatenated output is the same, sample for
+    sample, as ``resample`` of the concatenated input, without the whole signal
+    (or its resampled copy) ever being in memory.
+    """
+    if sr_in == sr_out:
+        for block in blocks:
+            yield np.asarray(block, dtype=np.float32)
+        return
+    import soxr
+
+    stream = soxr.ResampleStream(sr_in, sr_out, 1, dtype="float32", quality="HQ")
+    for block in blocks:
+        out = stream.resample_chunk(np.ascontiguousarray(block, dtype=np.float32), last=False)
+        if len(out):
+            yield out
+    out = stream.resample_chunk(np.zeros(0, dtype=np.float32), last=True)
+    if len(out):
+        yield out
+
+
+class _Sink:
+    """Decoded blocks in, one ``(channels, n)`` float32 array out: resampled as they come
+    (soxr's stream resampler gives the same samples as ``resample`` of the whole signal), written
+    into an array of the expected length (grown when a header understated it), and checked for
+    samples that are not finite."""
+
+    def __init__(self, sr_in: int, sr_out: int, channels: int, expected_frames: int):
+        self.sr_in, self.sr_out, self.channels = sr_in, sr_out, channels
+        self.frames_in = 0
+        self.n = 0
+        self.finite = True
+        self._stream = None
+        if sr_in != sr_out:
+            import soxr
+
+            self._stream = soxr.ResampleStream(sr_in, sr_out, channels, dtype="float32", quality="HQ")
+        expected = int(np.ceil(expected_frames * sr_out / sr_in)) + 64 if expected_frames > 0 else 0
+        self._buf = np.empty((channels, max(expected, 1 << 16)), dtype=np.float32)
+
+    def add(self, block: np.ndarray) -> None:
+        """``block``: ``(frames,)`` when mono, else ``(frames, channels)`` float32."""
+        self.frames_in += len(block)
+        if self._stream is not None:
+            block = self._stream.resample_chunk(block, last=False)
+        self._put(block)
+
+    def finish(self) -> np.ndarray:
+        if self._stream is not None:
+            empty = np.zeros((0,) if self.channels == 1 else (0, self.channels), dtype=np.float32)
+            self._put(self._stream.resample_chunk(empty, last=True))
+            self._stream = None
+        if self._buf.shape[1] - self.n > 1 + self._buf.shape[1] // 64:
+            # A header that overstated the length left room unused: give it back (in place where
+            # the layout allows, so a long song is never held twice).
+            if self.channels == 1:
+                self._buf.resize((1, self.n), refcheck=False)
+            else:
+                self._buf = self._buf[:, :self.n].copy()
+        return self._buf[:, :self.n]
+
+    def _put(self, block: np.ndarray) -> None:
+        k = len(block)
+        if k == 0:
+            return
+        if self.n + k > self._buf.shape[1]:
+            grown = np.empty((self.channels, max(self.n + k, self._buf.shape[1] * 3 // 2)), dtype=np.float32)
+            grown[:, :self.n] = self._buf[:, :self.n]
+            self._buf = grown
+        out = self._buf[:, self.n:self.n + k]
+        out[...] = block.T if block.ndim == 2 else block
+        if self.finite and not np.isfinite(out).all():
+            self.finite = False
+        self.n += k
 
 
 # --------------------------------------------------------------------------- checks
@@ -281,23 +365,33 @@ def _wav_data_problem(path: Path) -> str | None:
 
 # ------------------------------------------------------------------------ decoders
 
-def _decode_soundfile(info: AudioInfo, mono: bool) -> np.ndarray:
-    blocks = []
+def _decode_soundfile(info: AudioInfo, mono: bool, sink: _Sink) -> None:
+    buf = np.empty((_BLOCK_FRAMES, info.channels), dtype=np.float32)
+    weights = np.full(info.channels, 1.0 / info.channels, np.float32)
     try:
         with sf.SoundFile(str(info.path)) as fh:
             while True:
-                block = fh.read(_BLOCK_FRAMES, dtype="float32", always_2d=True)
+                block = fh.read(_BLOCK_FRAMES, dtype="float32", always_2d=True, out=buf)
                 if len(block) == 0:
                     break
-                # Down-mix block by block: a stereo file never sits in memory twice.
-                # (A matrix product is ~8x faster than mean(axis=1) on interleaved frames.)
-                blocks.append(block @ np.full(block.shape[1], 1.0 / block.shape[1], np.float32) if mono
-                              else block.T.copy())
+                sink.add(_mono(block, weights) if mono else block)
     except (sf.LibsndfileError, RuntimeError) as exc:
         raise _truncated(info.path, f"the decoder stopped: {_one_line(str(exc))}") from None
-    if not blocks:
-        return np.zeros(0 if mono else (info.channels, 0), dtype=np.float32)
-    return np.concatenate(blocks, axis=-1)
+
+
+def _mono(block: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """The mean of a ``(frames, channels)`` block's channels, ``(frames,)`` float32."""
+    if block.shape[1] == 1:
+        return block[:, 0].copy()
+    if block.shape[1] == 2:
+        # Exactly what the matrix product below gives for two channels (halving is exact; adding
+        # +0 turns -0 into +0 as BLAS's sum from zero does), without BLAS threads.
+        out = np.add(block[:, 0], block[:, 1])
+        out *= np.float32(0.5)
+        out += np.float32(0.0)
+        return out
+    # A matrix product is ~8x faster than mean(axis=1) on interleaved frames.
+    return block @ weights
 
 
 def _tool(name: str, path: Path) -> str:
@@ -345,7 +439,10 @@ def _ffprobe(path: Path) -> AudioInfo:
     return AudioInfo(path, samplerate, channels, frames, duration, fmt, "ffmpeg")
 
 
-def _decode_ffmpeg(info: AudioInfo, mono: bool, max_duration_s) -> np.ndarray:
+def _decode_ffmpeg(info: AudioInfo, mono: bool, max_duration_s, sink: _Sink) -> None:
+    import tempfile
+    import threading
+
     cmd = [_tool("ffmpeg", info.path), "-nostdin", "-hide_banner", "-loglevel", "error",
            "-i", _ffmpeg_input(info.path), "-map", "0:a:0", "-vn", "-sn", "-dn"]
     if max_duration_s is not None:
@@ -360,16 +457,47 @@ def _decode_ffmpeg(info: AudioInfo, mono: bool, max_duration_s) -> np.ndarray:
     else:
         cmd += ["-ac", str(channels)]
     cmd += ["-ar", str(info.samplerate), "-f", "f32le", "-acodec", "pcm_f32le", "pipe:1"]
-    try:
-        proc = subprocess.run(cmd, capture_output=True, timeout=_FFMPEG_TIMEOUT_S, check=False)
-    except subprocess.TimeoutExpired:
-        raise InputError(f"{info.path}: decoding took longer than {_FFMPEG_TIMEOUT_S:.0f} s; {_CONVERT_HINT}") from None
-    if proc.returncode != 0:
-        why = _one_line(proc.stderr.decode("utf-8", "replace")).replace(_ffmpeg_input(info.path) + ": ", "")
-        raise _truncated(info.path, f"ffmpeg failed: {why}")
-    data = np.frombuffer(proc.stdout, dtype="<f4")
-    data = data[: len(data) - len(data) % channels]
-    return data.reshape(-1, channels).T.copy() if channels > 1 else data.copy()
+    frame_bytes = 4 * channels
+    block_bytes = _BLOCK_FRAMES * frame_bytes
+    # The samples are read from the pipe as ffmpeg writes them (never the whole song as bytes);
+    # its messages go to a file, so that neither pipe can fill up and stall the other.
+    with tempfile.TemporaryFile() as err:
+        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=err)
+        timed_out = threading.Event()
+
+        def stop():
+            timed_out.set()
+            proc.kill()
+
+        timer = threading.Timer(_FFMPEG_TIMEOUT_S, stop)
+        timer.daemon = True
+        timer.start()
+        try:
+            pending = b""
+            while True:
+                chunk = proc.stdout.read(block_bytes)
+                if not chunk:
+                    break
+                chunk = pending + chunk
+                whole = len(chunk) - len(chunk) % frame_bytes
+                pending = chunk[whole:]
+                if whole:
+                    data = np.frombuffer(chunk, dtype="<f4", count=whole // 4)
+                    sink.add(data if channels == 1 else data.reshape(-1, channels))
+            returncode = proc.wait()
+        finally:
+            timer.cancel()
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+            proc.stdout.close()
+        if timed_out.is_set():
+            raise InputError(f"{info.path}: decoding took longer than {_FFMPEG_TIMEOUT_S:.0f} s; "
+                             f"{_CONVERT_HINT}") from None
+        if returncode != 0:
+            err.seek(0)
+            why = _one_line(err.read().decode("utf-8", "replace")).replace(_ffmpeg_input(info.path) + ": ", "")
+            raise _truncated(info.path, f"ffmpeg failed: {why}")
 
 
 def _float_or_nan(value) -> float:

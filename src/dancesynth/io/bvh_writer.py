@@ -3,6 +3,10 @@
 The skeleton's hierarchy, names, channel layout and End Sites are kept; the root
 OFFSET is written as zero (its position is in the channels); Euler angles vary
 continuously over frames; the file is written atomically.
+
+The MOTION rows are formatted a block of frames at a time by numpy (``format_rows``,
+the same bytes as ``"%.6f"`` per value) and a file is written block by block, so a
+long dance never holds its whole text in memory.
 """
 
 from __future__ import annotations
@@ -17,11 +21,18 @@ from ..errors import InputError
 from ..types import POSITION_CHANNELS, ROTATION_CHANNELS, MotionClip
 from .files import atomic_output
 
+#: Frames formatted per block: big enough that numpy's per-call cost is spread thin, small
+#: enough that a block's working arrays stay in the CPU cache.
+BLOCK_FRAMES = 64
+
+
 def write_bvh(path, clip: MotionClip, *, precision: int = 6) -> None:
     """Write ``clip`` to ``path`` as BVH (atomically: a failure leaves no partial file)."""
-    text = format_bvh(clip, precision=precision)
+    hierarchy, values = bvh_values(clip, precision=precision)
     with atomic_output(path, "w", encoding="utf-8", newline="\n") as fh:
-        fh.write(text)
+        fh.write(_motion_header(hierarchy, clip))
+        for block in row_blocks(values, precision):
+            fh.write(block)
 
 
 def _full_order(rot_axes: str) -> str:
@@ -32,15 +43,31 @@ def _full_order(rot_axes: str) -> str:
 def format_bvh(clip: MotionClip, *, precision: int = 6) -> str:
     """BVH text of ``clip``: the skeleton's hierarchy, names, channel layout and End Sites.
 
-    See ``bvh_parts`` for the conventions.
+    See ``bvh_values`` for the conventions.
     """
-    hierarchy, rows = bvh_parts(clip, precision=precision)
-    return "\n".join([hierarchy, "MOTION", f"Frames: {clip.n_frames}", f"Frame Time: {1.0 / clip.fps:.8f}",
-                      *rows]) + "\n"
+    hierarchy, values = bvh_values(clip, precision=precision)
+    return _motion_header(hierarchy, clip) + "".join(row_blocks(values, precision))
+
+
+def _motion_header(hierarchy: str, clip: MotionClip) -> str:
+    return f"{hierarchy}\nMOTION\nFrames: {clip.n_frames}\nFrame Time: {1.0 / clip.fps:.8f}\n"
 
 
 def bvh_parts(clip: MotionClip, *, precision: int = 6) -> tuple[str, list[str]]:
-    """The HIERARCHY section (without a final newline) and one text row per frame.
+    """The HIERARCHY section (without a final newline) and one text row per frame."""
+    hierarchy, values = bvh_values(clip, precision=precision)
+    return hierarchy, "".join(row_blocks(values, precision)).split("\n")[:-1]
+
+
+def row_blocks(values: np.ndarray, precision: int = 6, block: int = BLOCK_FRAMES):
+    """The MOTION rows of ``values`` (frames, channels), ``block`` frames of text at a time."""
+    for start in range(0, len(values), block):
+        yield format_rows(values[start:start + block], precision)
+
+
+def bvh_values(clip: MotionClip, *, precision: int = 6) -> tuple[str, np.ndarray]:
+    """The HIERARCHY section (without a final newline) and the channel values (frames, channels)
+    in file order.
 
     The root OFFSET is written as zero on the axes the root animates (its position
     is all in the channels), so Blender and three.js place the root alike. Euler
@@ -78,20 +105,6 @@ def bvh_parts(clip: MotionClip, *, precision: int = 6) -> tuple[str, list[str]]:
         if c in POSITION_CHANNELS:
             root_offset[POSITION_CHANNELS.index(c)] = 0.0
 
-    # Channel values, column by column, in file order.
-    euler: dict[int, np.ndarray] = {}
-    groups: dict[str, list[int]] = {}
-    for j, chans in enumerate(channels):
-        axes = "".join(c[0] for c in chans if c in ROTATION_CHANNELS)
-        if axes:
-            groups.setdefault(_full_order(axes), []).append(j)
-    for order, joints in groups.items():
-        with warnings.catch_warnings():
-            # At gimbal lock SciPy warns and picks one of the equivalent triples; fine here.
-            warnings.filterwarnings("ignore", message="Gimbal lock", category=UserWarning)
-            angles = rot.to_euler(clip.local_rot[:, joints], order)  # (F, k, 3), continuous along frames
-        for k, j in enumerate(joints):
-            euler[j] = angles[:, k]
     # BVH lists channels in the order the HIERARCHY visits joints (depth first), which
     # need not be our index order for a skeleton built in code.
     children = [[] for _ in range(sk.n_joints)]
@@ -102,23 +115,7 @@ def bvh_parts(clip: MotionClip, *, precision: int = 6) -> tuple[str, list[str]]:
         j = stack.pop()
         visit.append(j)
         stack.extend(reversed(children[j]))
-
-    columns = []
-    for j in visit:
-        r = 0
-        for c in channels[j]:
-            if c in POSITION_CHANNELS:
-                axis = POSITION_CHANNELS.index(c)
-                if j == 0:
-                    columns.append(clip.root_pos[:, axis] - root_offset[axis])
-                elif clip.local_pos is not None:
-                    columns.append(clip.local_pos[:, j, axis] - sk.offsets[j, axis])
-                else:
-                    columns.append(np.zeros(n_f))
-            else:
-                columns.append(euler[j][:, r])
-                r += 1
-    values = np.stack(columns, axis=1) if columns else np.zeros((n_f, 0))
+    values = _channel_values(clip, channels, visit, root_offset)
 
     num = f"{{:.{precision}f}}".format
     out = ["HIERARCHY"]
@@ -141,8 +138,115 @@ def bvh_parts(clip: MotionClip, *, precision: int = 6) -> tuple[str, list[str]]:
         out.append(f"{pad}}}")
 
     emit(0, 0)
-    row = " ".join([f"%.{precision}f"] * values.shape[1])
-    return "\n".join(out), [row % tuple(v) for v in values.tolist()]
+    return "\n".join(out), values
+
+
+def _channel_values(clip: MotionClip, channels: list, visit: list, root_offset: np.ndarray) -> np.ndarray:
+    """The MOTION values (frames, channels) in file order, filled ``rot.EULER_CHUNK`` frames at a
+    time (a whole 30-minute dance's Euler angles at once were 60 MB more)."""
+    sk, n_f = clip.skeleton, clip.n_frames
+    groups: dict[str, list[int]] = {}
+    for j, chans in enumerate(channels):
+        axes = "".join(c[0] for c in chans if c in ROTATION_CHANNELS)
+        if axes:
+            groups.setdefault(_full_order(axes), []).append(j)
+    # Where each joint's channels go: (column, position axis or None, rotation index)
+    columns, col = {}, 0
+    for j in visit:
+        r, out = 0, []
+        for c in channels[j]:
+            if c in POSITION_CHANNELS:
+                out.append((col, POSITION_CHANNELS.index(c), None))
+            else:
+                out.append((col, None, r))
+                r += 1
+            col += 1
+        columns[j] = out
+    values = np.zeros((n_f, col))
+    prev: dict[str, np.ndarray | None] = {order: None for order in groups}
+    for a in range(0, n_f, rot.EULER_CHUNK):
+        b = min(a + rot.EULER_CHUNK, n_f)
+        for order, joints in groups.items():
+            with warnings.catch_warnings():
+                # At gimbal lock SciPy warns and picks one of the equivalent triples; fine here.
+                warnings.filterwarnings("ignore", message="Gimbal lock", category=UserWarning)
+                angles = rot.to_euler(clip.local_rot[a:b, joints], order, prev=prev[order])  # continuous
+            prev[order] = angles[-1]
+            for k, j in enumerate(joints):
+                for c, _, r in columns[j]:
+                    if r is not None:
+                        values[a:b, c] = angles[:, k, r]
+        for j in visit:
+            for c, axis, _ in columns[j]:
+                if axis is None:
+                    continue
+                if j == 0:
+                    values[a:b, c] = clip.root_pos[a:b, axis] - root_offset[axis]
+                elif clip.local_pos is not None:
+                    values[a:b, c] = clip.local_pos[a:b, j, axis] - sk.offsets[j, axis]
+    return values
+
+
+def format_rows(values: np.ndarray, precision: int = 6) -> str:
+    """``"%.{precision}f"`` of every value, space-separated, each row ended by a newline.
+
+    The same bytes as Python's formatting, made by numpy for the whole block at once: each
+    value is rounded to an integer count of ``10**-precision`` and its digits are written
+    straight into the text's bytes. Python formats the rare values where that rounding could
+    differ from Python's exact decimal one (a product within an ulp of a half) or that are too
+    big for it, and they are placed in the same text.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    n, c = values.shape
+    if n == 0 or c == 0:
+        return "\n" * n
+    flat = values.ravel()
+    with np.errstate(over="ignore", invalid="ignore"):
+        scaled = np.abs(flat) * (10.0 ** precision)
+        # rint(scaled) is the exact decimal rounding unless the product's own rounding error (at
+        # most an ulp of it) could have carried it across a half, or it is too big for int64.
+        slow = (np.abs(scaled - np.floor(scaled) - 0.5) <= scaled * 2.0 ** -50) | ~(scaled < 2.0 ** 52)
+    np.rint(scaled, out=scaled)
+    scaled[slow] = 0.0
+    scaled = scaled.astype(np.int64)
+    unit = 10 ** precision
+    whole = scaled // unit
+    frac = scaled - whole * unit
+    n_whole = np.ones(len(flat), dtype=np.int64)  # digits before the point
+    k, top = 1, int(whole.max())
+    while 10 ** k <= top:
+        n_whole += whole >= 10 ** k
+        k += 1
+    neg = np.signbit(flat)  # also -0.0 and tiny negatives, which Python writes as -0.000000
+    dot = 1 if precision > 0 else 0
+    width = n_whole + (precision + dot) + neg
+    slow_at = np.flatnonzero(slow)
+    slow_text = [(f"%.{precision}f" % flat[i]).encode("ascii") for i in slow_at]
+    width[slow_at] = [len(t) for t in slow_text]
+    # Each value's bytes end just before its separator; fill them right to left, digit by digit.
+    end = np.cumsum(width + 1) - 1
+    out = np.empty(int(end[-1]) + 1, dtype=np.uint8)
+    out[end] = ord(" ")
+    out[end[c - 1::c]] = ord("\n")
+    pos = end - 1
+    for _ in range(precision):
+        q = frac // 10
+        out[pos] = frac - q * 10 + ord("0")
+        frac = q
+        pos -= 1
+    if dot:
+        out[pos] = ord(".")
+        pos -= 1
+    out[pos] = whole % 10 + ord("0")
+    for j in range(1, k):
+        whole //= 10
+        more = np.flatnonzero(n_whole > j)
+        out[pos[more] - j] = whole[more] % 10 + ord("0")
+    signed = np.flatnonzero(neg)
+    out[pos[signed] - n_whole[signed]] = ord("-")
+    for i, text in zip(slow_at, slow_text):
+        out[end[i] - len(text):end[i]] = np.frombuffer(text, dtype=np.uint8)
+    return out.tobytes().decode("ascii")
 
 
 class BVHStreamWriter:
@@ -168,14 +272,15 @@ class BVHStreamWriter:
     def append(self, clip: MotionClip) -> None:
         if clip.n_frames == 0:
             return
-        hierarchy, rows = bvh_parts(clip, precision=self.precision)
+        hierarchy, values = bvh_values(clip, precision=self.precision)
         if self._fh is None:
             self._fh = open(self.path, "w", encoding="utf-8", newline="\n")
             self._fh.write(hierarchy + "\nMOTION\nFrames: ")
             self._count_at = self._fh.tell()
             self._fh.write(" " * self.COUNT_WIDTH + f"\nFrame Time: {1.0 / clip.fps:.8f}\n")
         self._fh.seek(0, 2)
-        self._fh.write("\n".join(rows) + "\n")
+        for block in row_blocks(values, self.precision):
+            self._fh.write(block)
         self._fh.flush()
         self.frames += clip.n_frames
         self._fh.seek(self._count_at)

@@ -37,6 +37,7 @@ import numpy as np
 from .. import timebase
 from ..beat_tracking import dp_beat_track, dp_beat_track_varying
 from ..errors import InputError
+from .intensity import cumulative_energy
 from .onset import ANALYSIS_SR, HOP_LENGTH, onset_envelope
 
 # Chance level of the beat contrast (see ``beat_confidence``): on noise, where the
@@ -166,13 +167,14 @@ def sounding_span(y: np.ndarray, *, hop_length: int = HOP_LENGTH, frame_length: 
     ``below_loud_db`` below the 95th percentile of all frames. ``(0, -1)`` if all
     frames are silent.
     """
-    y = np.asarray(y, dtype=np.float64)
+    y = np.asarray(y)
     n_frames = 1 + len(y) // hop_length
-    energy = np.concatenate(([0.0], np.cumsum(y * y)))
     centres = np.arange(n_frames) * hop_length
     lo = np.clip(centres - frame_length // 2, 0, len(y))
     hi = np.clip(centres + frame_length // 2, 0, len(y))
-    mean_square = np.maximum(energy[hi] - energy[lo], 0.0) / frame_length
+    # Only the running energy at the frames' ends is kept (no float64 copy of the song).
+    energy = cumulative_energy(y, np.stack([lo, hi]))
+    mean_square = np.maximum(energy[1] - energy[0], 0.0) / frame_length
     with np.errstate(divide="ignore"):
         level = 10.0 * np.log10(mean_square)
     finite = level[np.isfinite(level)]

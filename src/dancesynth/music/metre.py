@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
-from ..io.audio import resample
+from ..io.audio import resample_blocks
 from .onset import ANALYSIS_SR
 
 METRES = (3, 4)
@@ -89,6 +89,11 @@ PHASE_MARGIN_FULL = 1.0
 PERIODICITY_WINDOW_BEATS = 24
 # Fewer beats than three bars of 4 show no metre.
 MIN_BEATS = 12
+# Samples of the song resampled and framed at a time by ``frame_features`` (3 s at 22050 Hz).
+_STREAM_BLOCK = 1 << 16
+# Chroma frames projected onto the pitch classes per matrix product, at least: OpenBLAS rounds
+# small products (one row: a matrix-vector product) differently from the whole song's.
+_MIN_BATCH = 256
 
 
 def beat_features(y: np.ndarray, sr: int = ANALYSIS_SR, *, beat_times_s, end_s: float | None = None) -> np.ndarray:
@@ -120,10 +125,7 @@ def beat_features(y: np.ndarray, sr: int = ANALYSIS_SR, *, beat_times_s, end_s: 
         step = float(np.median(np.diff(beats))) if beats.size > 1 else 0.5
         end_s = beats[-1] + step
     edges = np.minimum(np.append(beats, max(float(end_s), beats[-1])), duration_s)
-    y12 = resample(y, int(sr), FEATURE_SR)
-
-    power = _power_spectrogram(y12, CHROMA_N_FFT, CHROMA_HOP)
-    chroma = np.log1p(np.sqrt(power) @ _chroma_weights(FEATURE_SR, CHROMA_N_FFT))
+    chroma, bass, loud = frame_features(y, sr)
     # Only windows wholly inside the interval: one that reaches over a beat would mix
     # in the previous chord, more or less depending on how the frame grid falls.
     half_window_s = CHROMA_N_FFT / 2 / FEATURE_SR
@@ -133,10 +135,6 @@ def beat_features(y: np.ndarray, sr: int = ANALYSIS_SR, *, beat_times_s, end_s: 
     sums = np.concatenate((np.zeros((1, 12)), np.cumsum(chroma, axis=0, dtype=np.float64)))
     out[:, CHROMA] = (sums[hi] - sums[lo]) / (hi - lo)[:, None]
 
-    power = _power_spectrogram(y12, ACCENT_N_FFT, ACCENT_HOP, sine=True)
-    freqs = np.fft.rfftfreq(ACCENT_N_FFT, 1.0 / FEATURE_SR)
-    band = (freqs >= BASS_FMIN_HZ) & (freqs <= BASS_FMAX_HZ)
-    bass, loud = power[:, band].sum(axis=1), power.mean(axis=1)
     fps = FEATURE_SR / ACCENT_HOP
     quarter = (edges[1:] - edges[:-1]) / 4.0
     # The attack goes wholly into the window "after" the beat even when the beat is a
@@ -148,6 +146,89 @@ def beat_features(y: np.ndarray, sr: int = ANALYSIS_SR, *, beat_times_s, end_s: 
     out[:, BASS] = np.where(reaches_back, after - before, np.nan)
     out[:, LOUDNESS] = _level_db(loud, *_frame_span(onset, onset + 2 * quarter, fps, len(loud)))
     return out
+
+
+def frame_features(y: np.ndarray, sr: int = ANALYSIS_SR, *, block: int = _STREAM_BLOCK
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The frame-level cues ``beat_features`` sums over beats: ``(chroma, bass, loud)``.
+
+    ``chroma``: ``(frames, 12)`` float32 every ``CHROMA_HOP`` samples at ``FEATURE_SR``
+    (``log1p`` of the FFT magnitude summed per pitch class); ``bass`` and ``loud``:
+    the bass-band sum and the mean of the power spectrum, every ``ACCENT_HOP``
+    samples. ``y`` (mono at ``sr``) is resampled to ``FEATURE_SR`` and framed as it
+    streams, ``block`` samples at a time (soxr's stream resampler gives the same
+    samples as resampling the whole signal): memory is a block, not a copy of the song.
+    """
+    y = np.asarray(y)
+    chroma_frames = _Framer(CHROMA_N_FFT, CHROMA_HOP)
+    accent_frames = _Framer(ACCENT_N_FFT, ACCENT_HOP, sine=True)
+    weights = _chroma_weights(FEATURE_SR, CHROMA_N_FFT)
+    freqs = np.fft.rfftfreq(ACCENT_N_FFT, 1.0 / FEATURE_SR)
+    band = (freqs >= BASS_FMIN_HZ) & (freqs <= BASS_FMAX_HZ)
+    chroma, bass, loud = [], [], []
+    pending = []     # magnitude spectra not yet projected onto the pitch classes
+
+    def take(new_chroma, new_accent, last=False):
+        pending.append(np.sqrt(new_chroma))
+        rows = sum(len(m) for m in pending)
+        # Projected in batches of at least _MIN_BATCH frames (or all of a short song at once):
+        # BLAS rounds a one-row product differently, and every frame should get the numbers it
+        # gets when the whole song is projected in one product.
+        if rows >= 2 * _MIN_BATCH or (last and rows):
+            mags = np.concatenate(pending)
+            keep = 0 if last else _MIN_BATCH
+            chroma.append(np.log1p(mags[:len(mags) - keep] @ weights))
+            pending[:] = [mags[len(mags) - keep:]]
+        if len(new_accent):
+            bass.append(new_accent[:, band].sum(axis=1))
+            loud.append(new_accent.mean(axis=1))
+
+    pieces = (y[start:start + block] for start in range(0, len(y), block))
+    for piece in resample_blocks(pieces, int(sr), FEATURE_SR):
+        take(chroma_frames.push(piece), accent_frames.push(piece))
+    take(chroma_frames.finish(), accent_frames.finish(), last=True)
+    empty = np.zeros(0, dtype=np.float32)
+    return (np.concatenate(chroma) if chroma else np.zeros((0, 12), dtype=np.float32),
+            np.concatenate(bass) if bass else empty, np.concatenate(loud) if loud else empty)
+
+
+class _Framer:
+    """Power spectra of a signal that arrives in blocks: frames of ``n_fft`` samples centred on
+    samples ``0, hop, 2 hop, ...`` (the signal zero-padded by ``n_fft // 2`` at both ends), as
+    ``_power_spectrogram`` gives them for the whole signal, row for row."""
+
+    def __init__(self, n_fft: int, hop: int, *, sine: bool = False):
+        self.n_fft, self.hop, self.sine = n_fft, hop, sine
+        self._buf = np.zeros(n_fft // 2, dtype=np.float32)   # the left padding
+        self._start = 0        # position of _buf[0] in the padded signal
+        self._next = 0         # the next frame to give
+        self._n = 0            # samples pushed
+
+    def push(self, samples: np.ndarray) -> np.ndarray:
+        """The power spectra ``(frames, bins)`` of the frames ``samples`` completed."""
+        self._n += len(samples)
+        self._buf = np.concatenate((self._buf, np.asarray(samples, dtype=np.float32)))
+        end = self._start + len(self._buf)
+        count = max(0, (end - self.n_fft) // self.hop + 1 - self._next)
+        return self._spectra(count)
+
+    def finish(self) -> np.ndarray:
+        """The spectra of the frames that reach into the right padding."""
+        self._buf = np.concatenate((self._buf, np.zeros(self.n_fft // 2, dtype=np.float32)))
+        return self._spectra(1 + self._n // self.hop - self._next)
+
+    def _spectra(self, count: int) -> np.ndarray:
+        first = self._next * self.hop - self._start
+        if count <= 0:
+            out = np.zeros((0, self.n_fft // 2 + 1), dtype=np.float32)
+        else:
+            out = _power_spectrogram(self._buf[first:first + (count - 1) * self.hop + self.n_fft], self.n_fft,
+                                     self.hop, sine=self.sine, centred=False)
+            self._next += count
+            first += count * self.hop
+        self._buf = self._buf[first:].copy()
+        self._start += first
+        return out
 
 
 def bar_cues(features: np.ndarray) -> np.ndarray:
@@ -367,13 +448,19 @@ def _moving_mean(x: np.ndarray, width: int) -> np.ndarray:
         return np.where(n > 0, (sums[hi] - sums[lo]) / n, np.nan)
 
 
-def _power_spectrogram(y: np.ndarray, n_fft: int, hop: int, *, sine: bool = False) -> np.ndarray:
+def _power_spectrogram(y: np.ndarray, n_fft: int, hop: int, *, sine: bool = False,
+                       centred: bool = True) -> np.ndarray:
     """Power spectra of frames centred on samples ``0, hop, 2 hop, ...``, ``(frames, bins)``.
 
-    Periodic Hann window, or with ``sine`` its square root (a sine arch).
+    Periodic Hann window, or with ``sine`` its square root (a sine arch). With
+    ``centred=False`` the frames start at those samples instead (``y`` is padded already).
     """
-    padded = np.pad(np.asarray(y, dtype=np.float32), n_fft // 2)
-    n_frames = 1 + len(y) // hop
+    if centred:
+        padded = np.pad(np.asarray(y, dtype=np.float32), n_fft // 2)
+        n_frames = 1 + len(y) // hop
+    else:
+        padded = np.asarray(y, dtype=np.float32)
+        n_frames = 1 + (len(y) - n_fft) // hop
     frames = np.lib.stride_tricks.sliding_window_view(padded, n_fft)[::hop][:n_frames]
     arch = np.sin(np.pi * np.arange(n_fft) / n_fft)
     window = (arch if sine else arch * arch).astype(np.float32)

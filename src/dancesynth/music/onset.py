@@ -16,6 +16,8 @@ the onset itself, not on the frame whose window first touches it.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 from ..errors import InputError
 
@@ -31,6 +33,11 @@ TOP_DB = 80.0
 # Frames transformed per FFT call: big enough to amortise the call, small enough
 # that a block's spectra (1024 x 1025 complex64 = 8 MB) stay in cache-friendly memory.
 _BLOCK_FRAMES = 1024
+# Frames per FFT call within a block: numpy's real FFT needs several times its output in working
+# memory (40 MB for 1024 frames).
+_FFT_ROWS = 128
+# Frames whose log-mel spectrum ``onset_envelope`` keeps between its passes (16 MB, 11 minutes).
+KEPT_FRAMES = 32 * _BLOCK_FRAMES
 
 
 def hz_to_mel(hz):
@@ -88,25 +95,49 @@ def mel_power_spectrogram(y: np.ndarray, sr: float, *, hop_length: int = HOP_LEN
     ``i * hop_length``, the signal zero-padded by ``n_fft // 2`` at both ends
     (librosa's ``center=True, pad_mode="constant"``).
     """
-    y = np.asarray(y, dtype=np.float32)
-    if y.ndim != 1:
-        raise InputError(f"expected mono samples of shape (n,), got {y.shape}")
-    padded = np.pad(y, n_fft // 2)
-    n_frames = 1 + len(y) // hop_length
-    frames = np.lib.stride_tricks.as_strided(
-        padded, shape=(n_frames, n_fft), strides=(padded.strides[0] * hop_length, padded.strides[0]),
-        writeable=False)
-    window = (0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(n_fft) / n_fft)).astype(np.float32)
-    basis_t = np.ascontiguousarray(mel_filterbank(sr, n_fft, n_mels=n_mels).T, dtype=np.float32)
-    mel = np.empty((n_frames, n_mels), dtype=np.float32)
-    for start in range(0, n_frames, _BLOCK_FRAMES):
-        spectrum = np.fft.rfft(frames[start:start + _BLOCK_FRAMES] * window, axis=1)
-        power = np.square(spectrum.real) + np.square(spectrum.imag)
-        np.matmul(power, basis_t, out=mel[start:start + _BLOCK_FRAMES])
+    y = _mono_samples(y)
+    mel = np.empty((1 + len(y) // hop_length, n_mels), dtype=np.float32)
+    for start, block in mel_power_blocks(y, sr, hop_length=hop_length, n_fft=n_fft, n_mels=n_mels):
+        mel[start:start + len(block)] = block
     return mel
 
 
-def onset_envelope(y: np.ndarray, sr: int = ANALYSIS_SR, *, hop_length: int = HOP_LENGTH) -> np.ndarray:
+def mel_power_blocks(y: np.ndarray, sr: float, *, hop_length: int = HOP_LENGTH, n_fft: int = N_FFT,
+                     n_mels: int = N_MELS, start_frame: int = 0):
+    """``mel_power_spectrogram`` in blocks of frames: yields ``(first frame, (frames, n_mels) float32)``.
+
+    Each block is framed from its own stretch of ``y`` (zero-padded only at the signal's
+    ends), so no padded copy of the whole signal is made; the values are the same.
+    Blocks start at multiples of 1024 frames, from ``start_frame`` (rounded down to one).
+    """
+    y = _mono_samples(y)
+    n = len(y)
+    n_frames = 1 + n // hop_length
+    half = n_fft // 2
+    window = (0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(n_fft) / n_fft)).astype(np.float32)
+    basis_t = np.ascontiguousarray(mel_filterbank(sr, n_fft, n_mels=n_mels).T, dtype=np.float32)
+    power = np.empty((min(_BLOCK_FRAMES, n_frames), 1 + n_fft // 2), dtype=np.float32)
+    for start in range(int(start_frame) // _BLOCK_FRAMES * _BLOCK_FRAMES, n_frames, _BLOCK_FRAMES):
+        stop = min(start + _BLOCK_FRAMES, n_frames)
+        lo, hi = start * hop_length - half, (stop - 1) * hop_length - half + n_fft
+        piece = np.asarray(y[max(lo, 0):min(hi, n)], dtype=np.float32)
+        if lo < 0 or hi > n:
+            piece = np.pad(piece, (max(0, -lo), max(0, hi - n)))
+        frames = np.lib.stride_tricks.as_strided(
+            piece, shape=(stop - start, n_fft), strides=(piece.strides[0] * hop_length, piece.strides[0]),
+            writeable=False)
+        # The FFT a few rows at a time (its working memory is several times its output); the
+        # product with the filters over the whole block, as before.
+        for a in range(0, stop - start, _FFT_ROWS):
+            b = min(a + _FFT_ROWS, stop - start)
+            spectrum = np.fft.rfft(frames[a:b] * window, axis=1)
+            np.square(spectrum.real, out=power[a:b])
+            power[a:b] += np.square(spectrum.imag)
+        yield start, np.matmul(power[:stop - start], basis_t)
+
+
+def onset_envelope(y: np.ndarray, sr: int = ANALYSIS_SR, *, hop_length: int = HOP_LENGTH,
+                   kept_frames: int = KEPT_FRAMES) -> np.ndarray:
     """Onset strength, one value per hop: how much the log-mel spectrum rises, in dB averaged over bands.
 
     ``y`` are mono samples at rate ``sr``. Returns ``(1 + len(y) // hop_length,)``
@@ -114,11 +145,60 @@ def onset_envelope(y: np.ndarray, sr: int = ANALYSIS_SR, *, hop_length: int = HO
     sr=sr, hop_length=hop_length)``: the positive first difference of the 128-band
     log-mel spectrogram (80 dB range), averaged over the bands and delayed by
     ``1 + 2048 // (2 * hop_length)`` frames (zeros at the start).
+
+    The 80 dB range hangs from the loudest value of the whole song, so the rises
+    can only be taken once every frame has been seen. The log-mel spectrogram of
+    the first ``kept_frames`` frames (512 bytes a frame: 16 MB, 11 minutes at 50
+    frames a second) is kept for that; frames beyond are transformed a second time
+    instead of kept, so memory stays bounded for a song of any length. Either way
+    the values are the same.
     """
-    db = power_to_db(mel_power_spectrogram(y, sr, hop_length=hop_length))
-    flux = np.maximum(db[1:] - db[:-1], 0.0).mean(axis=1, dtype=np.float32)
-    env = np.zeros(len(db), dtype=np.float32)
+    y = _mono_samples(y)
+    n = 1 + len(y) // hop_length
+    # Whole blocks, so that the second pass transforms exactly the blocks the first did.
+    keep = n if n <= kept_frames else max(0, int(kept_frames)) // _BLOCK_FRAMES * _BLOCK_FRAMES
+    head = np.empty((keep, N_MELS), dtype=np.float32)
+    top = None
+    for start, mel in mel_power_blocks(y, sr, hop_length=hop_length):
+        block = head[start:start + len(mel)] if start < keep else mel
+        _to_db(mel, out=block)
+        block_top = block.max()
+        top = block_top if top is None else max(top, block_top)
+    env = np.zeros(n, dtype=np.float32)
+    if top is None:
+        return env
+    floor = top - TOP_DB                    # float32, as ``power_to_db`` computes it
+    np.maximum(head, floor, out=head)
+    blocks = (head[a:a + _BLOCK_FRAMES] for a in range(0, keep, _BLOCK_FRAMES))
+    if keep < n:
+        blocks = itertools.chain(blocks, (np.maximum(_to_db(mel, out=mel), floor, out=mel) for _, mel in
+                                          mel_power_blocks(y, sr, hop_length=hop_length, start_frame=keep)))
+    # env[delay + i] is the rise from frame i to frame i + 1.
     delay = 1 + N_FFT // (2 * hop_length)
-    if len(db) > delay:
-        env[delay:] = flux[:len(db) - delay]
+    previous, done = None, 0      # the last frame of the block before; frames seen
+    for block in blocks:
+        rows = block if previous is None else np.concatenate((previous[None], block))
+        first = done - (previous is not None)       # the frame rows[0] is
+        pairs = min(len(rows) - 1, n - delay - first)
+        if pairs > 0:
+            rise = rows[1:pairs + 1] - rows[:pairs]
+            np.maximum(rise, 0.0, out=rise)
+            env[delay + first:delay + first + pairs] = rise.mean(axis=1, dtype=np.float32)
+        previous = block[-1].copy()
+        done += len(block)
     return env
+
+
+def _to_db(power: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``power_to_db`` without its floor, into ``out`` (the same float32 operations)."""
+    np.maximum(power, 1e-10, out=out)
+    np.log10(out, out=out)
+    out *= 10.0
+    return out
+
+
+def _mono_samples(y) -> np.ndarray:
+    y = np.asarray(y)
+    if y.ndim != 1:
+        raise InputError(f"expected mono samples of shape (n,), got {y.shape}")
+    return y

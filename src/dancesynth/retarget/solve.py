@@ -35,15 +35,22 @@ MIN_SEGMENT_M = 0.01      # shorter bone segments have no reliable direction
 GROUND_PERCENTILE = 1.0
 REACH = 0.998             # IK targets are kept this far inside a leg's full length, where knees still bend ...
 REACH_MAX = 0.9999        # ... and a leg is never solved straighter than this
+# Frames solved at a time by ``retarget``: its working memory is ~30 kB a frame.
+CHUNK_FRAMES = 2048
 DROP_SMOOTH_S = 0.15      # the hips sink to let the legs reach over about this long   # the source's ankle height when standing: a low percentile, robust to a glitch
 
 
 def retarget(clip: MotionClip, character: Character, source_bones: dict[str, int] | None = None, *,
-             source_ground: float | None = None) -> MotionClip:
+             source_ground: float | None = None, chunk_frames: int = CHUNK_FRAMES) -> MotionClip:
     """``clip`` danced by ``character``: a MotionClip on ``character.skeleton`` with the same frames.
 
     ``source_ground``: the source's standing ankle height, when known (a stream's segments share
     one, so the floor does not move between them); by default measured on ``clip``.
+
+    Frames are solved ``chunk_frames`` at a time (every step but two is per frame; the floor
+    and the hips' drop look at all frames and are computed between the passes), so the memory
+    is the result plus a few numbers per frame, however long the dance; the numbers are the
+    same as solving all frames at once.
     """
     src_bones = source_bones or find_bones(clip.skeleton, what="the dance's skeleton")
     tgt = character.skeleton
@@ -51,7 +58,6 @@ def retarget(clip: MotionClip, character: Character, source_bones: dict[str, int
     pairs = mapped_pairs(src_bones, tgt_bones)
     ends = segment_ends(src_bones, tgt_bones)
 
-    g_src, p_src = fk(clip.local_rot, clip.root_pos, clip.skeleton.offsets, clip.skeleton.parents, clip.local_pos)
     n_j = clip.skeleton.n_joints
     _, p_src_rest = fk(np.tile(rot.IDENTITY, (n_j, 1)), np.zeros(3), clip.skeleton.offsets, clip.skeleton.parents)
     g_tgt_rest, p_tgt_rest = fk(character.rest_rot, character.rest_root, tgt.offsets, tgt.parents)
@@ -60,32 +66,64 @@ def retarget(clip: MotionClip, character: Character, source_bones: dict[str, int
             if min(np.linalg.norm(p_src_rest[src_bones[e]] - p_src_rest[src_bones[b]]),
                    np.linalg.norm(p_tgt_rest[tgt_bones[e]] - p_tgt_rest[tgt_bones[b]])) > MIN_SEGMENT_M}
     align = _rest_alignment(pairs, ends, src_bones, tgt_bones, p_src_rest, p_tgt_rest)
-    g = _global_rotations(clip.n_frames, character, pairs, ends, src_bones, tgt_bones, align,
-                          g_src, p_src, p_src_rest, g_tgt_rest, p_tgt_rest)
 
     scale = leg_length(p_tgt_rest, tgt_bones) / leg_length(p_src_rest, src_bones)
-    src_ground = _ground(p_src, src_bones) if source_ground is None else source_ground
+    src_ground = _chunked_ground(clip, src_bones, chunk_frames) if source_ground is None else source_ground
     tgt_ground = character.ankle_ground if character.ankle_ground is not None else _ground(p_tgt_rest[None],
                                                                                             tgt_bones)
-    pos = _positions(g, np.zeros((clip.n_frames, 3)), tgt)
+    n = clip.n_frames
     legs = [tgt_bones[s + "UpperLeg"] for s in SIDES]
-    src_mid = p_src[:, [src_bones[s + "UpperLeg"] for s in SIDES]].mean(axis=1)
-    # Translation moves every joint alike: shift the root so the upper legs' mid-point lands where it should.
-    root_pos = _scaled(src_mid, scale, src_ground, tgt_ground) - pos[:, legs].mean(axis=1)
-    pos += root_pos[:, None]
-    ankles = {side: _scaled(p_src[:, src_bones[side + "Foot"]], scale, src_ground, tgt_ground) for side in SIDES}
-    for a in ankles.values():
-        a[:, 1] = np.maximum(a[:, 1], tgt_ground)   # never below the standing ankle height
-    drop = _reach_drop(pos, tgt_bones, ankles, clip.fps)
+    leg_joints = [tgt_bones[s + b] for s in SIDES for b in ("UpperLeg", "LowerLeg", "Foot")]
+    g = np.empty((n, tgt.n_joints, 4))             # global rotations, then (in place) the local ones
+    root_pos = np.empty((n, 3))
+    leg_pos = np.empty((n, len(leg_joints), 3))    # the legs' joints, all the feet need
+    ankles = {side: np.empty((n, 3)) for side in SIDES}
+    need = np.empty(n)
+    for a, b in _chunks(n, chunk_frames):
+        g_src, p_src = fk(clip.local_rot[a:b], clip.root_pos[a:b], clip.skeleton.offsets, clip.skeleton.parents,
+                          None if clip.local_pos is None else clip.local_pos[a:b])
+        g[a:b] = _global_rotations(b - a, character, pairs, ends, src_bones, tgt_bones, align,
+                                   g_src, p_src, p_src_rest, g_tgt_rest, p_tgt_rest)
+        pos = _positions(g[a:b], np.zeros((b - a, 3)), tgt)
+        src_mid = p_src[:, [src_bones[s + "UpperLeg"] for s in SIDES]].mean(axis=1)
+        # Translation moves every joint alike: shift the root so the upper legs' mid-point lands where it should.
+        root_pos[a:b] = _scaled(src_mid, scale, src_ground, tgt_ground) - pos[:, legs].mean(axis=1)
+        pos += root_pos[a:b, None]
+        chunk_ankles = {}
+        for side in SIDES:
+            target = _scaled(p_src[:, src_bones[side + "Foot"]], scale, src_ground, tgt_ground)
+            target[:, 1] = np.maximum(target[:, 1], tgt_ground)   # never below the standing ankle height
+            ankles[side][a:b] = chunk_ankles[side] = target
+        need[a:b] = _reach_need(pos, tgt_bones, chunk_ankles)
+        leg_pos[a:b] = pos[:, leg_joints]
+    drop = _smooth_drop(need, clip.fps)
     root_pos[:, 1] -= drop
-    pos[:, :, 1] -= drop[:, None]
-    for side in SIDES:
-        _plant_foot(g, pos, tgt, tgt_bones, side, ankles[side])
+    leg_pos[:, :, 1] -= drop[:, None]
+    for a, b in _chunks(n, chunk_frames):
+        for i, side in enumerate(SIDES):
+            _plant_leg(g[a:b], tgt_bones, side, ankles[side][a:b], *leg_pos[a:b, 3 * i:3 * i + 3].transpose(1, 0, 2))
+        chunk = g[a:b]
+        local = rot.mul(rot.inv(chunk[:, tgt.parents[1:]]), chunk[:, 1:])
+        chunk[:, 1:] = local
+    return MotionClip(tgt, clip.fps, root_pos, g, meta=dict(clip.meta), provenance=clip.provenance)
 
-    local = np.empty_like(g)
-    local[:, 0] = g[:, 0]
-    local[:, 1:] = rot.mul(rot.inv(g[:, tgt.parents[1:]]), g[:, 1:])
-    return MotionClip(tgt, clip.fps, root_pos, local, meta=dict(clip.meta), provenance=clip.provenance)
+
+def _chunks(n: int, size: int):
+    """``(start, stop)`` of consecutive blocks of at most ``size`` frames covering ``0..n``."""
+    size = max(int(size), 1)
+    return [(a, min(a + size, n)) for a in range(0, n, size)]
+
+
+def _chunked_ground(clip: MotionClip, bones: dict[str, int], chunk_frames: int) -> float:
+    """``_ground`` of the clip's positions, the ankles' forward kinematics a chunk of frames at a time."""
+    feet = [bones["leftFoot"], bones["rightFoot"]]
+    sk = clip.skeleton
+    lowest = np.empty(clip.n_frames)
+    for a, b in _chunks(clip.n_frames, chunk_frames):
+        _, p = fk(clip.local_rot[a:b], clip.root_pos[a:b], sk.offsets, sk.parents,
+                  None if clip.local_pos is None else clip.local_pos[a:b], only=feet)
+        lowest[a:b] = p[:, feet, 1].min(axis=1)
+    return float(np.percentile(lowest, GROUND_PERCENTILE))
 
 
 def _body_frame(p_rest: np.ndarray, bones: dict[str, int]) -> np.ndarray:
@@ -150,8 +188,7 @@ def _global_rotations(n_frames, character, pairs, ends, src_bones, tgt_bones, al
 
 def source_ground(clip: MotionClip, bones: dict[str, int]) -> float:
     """The standing ankle height of ``clip`` (for ``retarget(..., source_ground=)``)."""
-    return _ground(fk(clip.local_rot, clip.root_pos, clip.skeleton.offsets, clip.skeleton.parents,
-                      clip.local_pos)[1], bones)
+    return _chunked_ground(clip, bones, CHUNK_FRAMES)
 
 
 def _ground(positions: np.ndarray, bones: dict[str, int]) -> float:
@@ -176,12 +213,10 @@ def _positions(g: np.ndarray, root_pos: np.ndarray, skeleton) -> np.ndarray:
     return pos
 
 
-def _reach_drop(pos, bones, ankles: dict, fps: float) -> np.ndarray:
-    """(F,) how far to lower the root so both legs reach their ankle targets: a target's legs, in
-    proportion, can be a little shorter than the source's where the source stands straight-legged.
-    Raised to the frames around each need, then smoothed, so the hips sink gently, not in a pop."""
-    from scipy.ndimage import gaussian_filter1d, maximum_filter1d
-
+def _reach_need(pos, bones, ankles: dict) -> np.ndarray:
+    """(F,) how far the root must come down for both legs to reach their ankle targets: a target's
+    legs, in proportion, can be a little shorter than the source's where the source stands
+    straight-legged."""
     need = np.zeros(len(pos))
     for side, target in ankles.items():
         hip, knee, ankle = (bones[side + b] for b in ("UpperLeg", "LowerLeg", "Foot"))
@@ -190,14 +225,23 @@ def _reach_drop(pos, bones, ankles: dict, fps: float) -> np.ndarray:
         v = target - pos[:, hip]
         across = np.minimum(np.linalg.norm(v[:, [0, 2]], axis=-1), reach)
         need = np.maximum(need, -v[:, 1] - np.sqrt(reach ** 2 - across ** 2))
+    return need
+
+
+def _smooth_drop(need: np.ndarray, fps: float) -> np.ndarray:
+    """(F,) how far to lower the root: ``_reach_need`` raised to the frames around each need, then
+    smoothed, so the hips sink gently, not in a pop."""
+    from scipy.ndimage import gaussian_filter1d, maximum_filter1d
+
     window = max(1, int(round(DROP_SMOOTH_S * fps)))
     return gaussian_filter1d(maximum_filter1d(np.maximum(need, 0.0), 2 * window + 1), window / 2, mode="nearest")
 
 
-def _plant_foot(g, pos, skeleton, bones, side: str, target: np.ndarray) -> None:
-    """Two-bone IK of one leg so its ankle reaches ``target`` (F, 3); updates ``g`` and ``pos`` below the hip."""
-    hip, knee, ankle = (bones[side + b] for b in ("UpperLeg", "LowerLeg", "Foot"))
-    h, k, a = pos[:, hip], pos[:, knee], pos[:, ankle]
+def _plant_leg(g, bones, side: str, target: np.ndarray, h: np.ndarray, k: np.ndarray, a: np.ndarray) -> None:
+    """Two-bone IK of one leg so its ankle reaches ``target`` (F, 3) from hip, knee and ankle at
+    ``h``, ``k``, ``a`` (F, 3); turns the upper and lower leg in ``g``. Joints below the knee keep
+    their world rotation."""
+    hip, knee = bones[side + "UpperLeg"], bones[side + "LowerLeg"]
     l1 = np.linalg.norm(k - h, axis=-1)
     l2 = np.linalg.norm(a - k, axis=-1)
     to_target = target - h
@@ -213,18 +257,3 @@ def _plant_foot(g, pos, skeleton, bones, side: str, target: np.ndarray) -> None:
     g[:, hip] = rot.mul(turn_hip, g[:, hip])
     shin = rot.apply(turn_hip, a - k)
     g[:, knee] = rot.mul(_rotation_between(shin, new_ankle - new_knee), rot.mul(turn_hip, g[:, knee]))
-    # Joints below the knee other than the foot's own chain keep their world rotation; move the positions.
-    moved = [j for j in range(skeleton.n_joints) if _below(skeleton.parents, j, knee)]
-    pos[:, knee] = new_knee
-    for j in moved:
-        p = skeleton.parents[j]
-        pos[:, j] = pos[:, p] + rot.apply(g[:, p], skeleton.offsets[j])
-
-
-def _below(parents, j: int, top: int) -> bool:
-    j = parents[j]
-    while j >= 0:
-        if j == top:
-            return True
-        j = parents[j]
-    return False

@@ -24,7 +24,7 @@ from functools import cached_property
 import numpy as np
 
 from ...motion.database import Style
-from ...motion.roles import find_roles
+from ...motion.roles import JointRoles, find_roles
 from ...types import DEFAULT_FPS
 from ..footlock import FootLockState, lock_feet
 from ..stitch import Pieces, Rendered, StitchState, beat_ease, render
@@ -120,15 +120,17 @@ class SegmentFrames:
     path: Path
     pieces: Pieces
     search_s: float = 0.0   # time spent in the path search (the paper's "synthesis")
-    render_s: float = 0.0   # time spent turning the path into frames
+    render_s: float = 0.0   # time spent turning the path into frames (stitching and foot lock)
+    foot_lock_s: float = 0.0  # the foot lock's part of render_s
     motifs: np.ndarray | None = None  # (beats,) motif of the word danced on each beat, when known
 
     @classmethod
     def of(cls, frames: Rendered, local_rot: np.ndarray, path: Path, pieces: Pieces,
-           search_s: float, render_s: float, signature: SignatureTarget | None = None) -> "SegmentFrames":
+           search_s: float, render_s: float, signature: SignatureTarget | None = None, *,
+           foot_lock_s: float = 0.0) -> "SegmentFrames":
         motifs = None if signature is None else signature.node_motif[path.nodes[1:]]
         return cls(local_rot, frames.root_pos, frames.contacts, frames.source_pos, path, pieces, search_s, render_s,
-                   motifs)
+                   foot_lock_s, motifs)
 
     def warp_rates(self, source_fps: float) -> np.ndarray:
         """Playback rate of each beat piece (source seconds per music second)."""
@@ -226,14 +228,16 @@ class GraphEngine:
         last = segment.end_s is not None
         stitch, frames = render(
             self.style, pieces, state.stitch, fps=self.fps, end_s=segment.end_s if last else float(beats[-1]),
-            blend_s=self.config.blend_s, inclusive_end=last)
+            blend_s=self.config.blend_s, inclusive_end=last, roles=self.roles)
+        t2 = time.perf_counter()
         local, feet = self._lock_feet(frames, state.feet)
+        t3 = time.perf_counter()
         new_state = replace(state, node=int(path.nodes[-1]), prev_duration_s=float(beats[-1] - beats[-2]),
                             n_heard=n, mean_db=mean, m2_db=m2, stitch=stitch, segments=state.segments + 1,
                             recent=recent, feet=feet,
                             motif_counts=None if counts is None else self.signature.count(counts, path.nodes[1:]))
         return new_state, SegmentFrames.of(frames, local, path, pieces, t1 - t0, time.perf_counter() - t1,
-                                           self.signature)
+                                           self.signature, foot_lock_s=t3 - t2)
 
     def run_global(self, beat_times_s: np.ndarray, intensity_db: np.ndarray, end_s: float,
                    seed: int | None = None, bar_position: np.ndarray | None = None,
@@ -257,9 +261,17 @@ class GraphEngine:
         pieces = pieces_from_path(self.graph, path, np.asarray(beat_times_s, dtype=np.float64), beat_count,
                                   self.config.beat_ease(len(beat_times_s), bar_position, beats_per_bar))
         _, frames = render(self.style, pieces, state.stitch, fps=self.fps, end_s=end_s, blend_s=self.config.blend_s,
-                           inclusive_end=True)
+                           inclusive_end=True, roles=self.roles)
+        t2 = time.perf_counter()
         local, _ = self._lock_feet(frames, state.feet)
-        return SegmentFrames.of(frames, local, path, pieces, t1 - t0, time.perf_counter() - t1, self.signature)
+        t3 = time.perf_counter()
+        return SegmentFrames.of(frames, local, path, pieces, t1 - t0, t3 - t1, self.signature,
+                                foot_lock_s=t3 - t2)
+
+    @cached_property
+    def roles(self) -> JointRoles:
+        """The style's feet, knees and hips (found once: each segment's render and foot lock need them)."""
+        return find_roles(self.style.skeleton)
 
     @cached_property
     def steps(self) -> StepCosts:
@@ -279,11 +291,16 @@ class GraphEngine:
         if music_beat is not None:
             cls[~np.asarray(music_beat, dtype=bool)] = 1
         cls[0] = -1  # the segment's first node was chosen by the previous segment
-        costs = np.stack([-self.config.downbeat_stop * np.minimum(strength, 3.0),
-                          self.config.accent.beat_costs(strength, strength)[1]])
-        return {"beat_class": cls, "class_cost": costs}
+        return {"beat_class": cls, "class_cost": self._class_costs}
+
+    @cached_property
+    def _class_costs(self) -> np.ndarray:
+        """(2, N): arriving at each node on a bar's first beat, and on a grid beat that is no music beat."""
+        strength = self.graph.node_accent
+        return np.stack([-self.config.downbeat_stop * np.minimum(strength, 3.0),
+                         self.config.accent.beat_costs(strength, strength)[1]])
 
     def _lock_feet(self, frames: Rendered, feet: FootLockState):
         if not self.config.foot_lock:
             return frames.local_rot, feet
-        return lock_feet(self.style.skeleton, find_roles(self.style.skeleton), frames, feet, fps=self.fps)
+        return lock_feet(self.style.skeleton, self.roles, frames, feet, fps=self.fps)

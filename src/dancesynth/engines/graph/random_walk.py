@@ -131,12 +131,14 @@ class RandomWalkEngine:
         stitch, frames = render(self.style, pieces, state.stitch, fps=self.fps,
                                 end_s=segment.end_s if last else float(beats[-1]),
                                 blend_s=self.config.blend_s, inclusive_end=last)
+        t2 = time.perf_counter()
         local, feet = frames.local_rot, state.feet
         if self.config.foot_lock:
             local, feet = lock_feet(self.style.skeleton, find_roles(self.style.skeleton), frames, feet, fps=self.fps)
         new = replace(state, node=int(path.nodes[-1]), rng_state=rng.bit_generator.state, stitch=stitch,
                       feet=feet, segments=state.segments + 1, restarts=state.restarts + restarts)
-        return new, SegmentFrames.of(frames, local, path, pieces, t1 - t0, time.perf_counter() - t1)
+        t3 = time.perf_counter()
+        return new, SegmentFrames.of(frames, local, path, pieces, t1 - t0, t3 - t1, foot_lock_s=t3 - t2)
 
     @property
     def _out(self) -> OutSteps:

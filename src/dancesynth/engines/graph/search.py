@@ -77,6 +77,12 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     ``steps``: the graph's ``StepCosts`` for this ``jump_cost`` and ``accent``, built once and
     reused across segments (built here when not given). ``intensity_weight`` scales eq. (8)'s
     intensity deviation against the costs added beyond the paper (1 = as printed).
+
+    On a large graph only the steps leaving a node the path can be at (a finite cost) are
+    relaxed: a streaming segment starts at one node, and within a segment's few beats the path
+    reaches a small part of the graph (about 2 % of a large style's beats after 11 beats), so
+    most of the graph's steps would only add infinity. The result is the same as relaxing every
+    step (``BeatTerms``).
     """
     intensity_z = np.asarray(intensity_z, dtype=np.float64)
     durations_s = np.asarray(durations_s, dtype=np.float64)
@@ -89,20 +95,28 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     # in: the same result, fewer operations, and backtracking is unaffected.
     penalty = None if node_penalty is None else np.asarray(node_penalty, dtype=np.float64)
     prev = np.r_[np.nan if prev_duration_s is None else prev_duration_s, durations_s[:-1]]
+    terms = BeatTerms(steps, intensity_weight * np.abs(graph.w1_z - intensity_z[:, None]), durations_s, prev)
+    reached = np.flatnonzero(np.isfinite(costs[0]))
 
     for k in range(k_steps):
-        # Eq. (8) for every destination at once. Mono steps have one destination each;
-        # jumps are sorted by destination, so a reduceat takes each destination's best.
-        dev = intensity_weight * np.abs(graph.w1_z - intensity_z[k])
+        # Eq. (8) for every destination at once. A node has one mono step in; jumps are sorted by
+        # destination, so a reduceat takes each destination's best when every jump is relaxed,
+        # and minimum.at when only those leaving the reached nodes are.
         row = costs[k + 1]
-        row[steps.m_dst] = steps.mono(costs[k], dev, durations_s[k])
-        if steps.j_nodes.size:
-            best = np.minimum.reduceat(steps.jump(costs[k], dev, prev[k], durations_s[k]), steps.j_starts)
-            row[steps.j_nodes] = np.minimum(row[steps.j_nodes], best)
+        m_sel, j_sel = (slice(None), slice(None)) if terms.every_step else steps.leaving(reached)
+        row[steps.m_dst[m_sel]] = terms.mono(k, costs[k], m_sel)
+        arrive = terms.jump(k, costs[k], j_sel)
+        if isinstance(j_sel, slice):
+            if steps.j_nodes.size:
+                row[steps.j_nodes] = np.minimum(row[steps.j_nodes], np.minimum.reduceat(arrive, steps.j_starts))
+        else:
+            np.minimum.at(row, steps.j_dst[j_sel], arrive)
         if penalty is not None:
             row += penalty
         if beat_class is not None and beat_class[k + 1] >= 0:
             row += class_cost[beat_class[k + 1]]
+        if not terms.every_step:
+            reached = np.flatnonzero(np.isfinite(row))
 
     ok = (graph.capacity >= thc) & np.isfinite(costs[k_steps])
     if not ok.any():
@@ -116,12 +130,10 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     jumped = np.empty(k_steps, dtype=bool)
     nodes[k_steps] = end
     for k in range(k_steps - 1, -1, -1):
-        dev = intensity_weight * np.abs(graph.w1_z - intensity_z[k])
         v = nodes[k + 1]
         m_sel = steps.mono_into[v:v + 1] if steps.mono_into[v] >= 0 else np.zeros(0, dtype=np.int64)
         j_sel = np.arange(steps.j_first[v], steps.j_last[v])
-        cand = np.r_[steps.mono(costs[k], dev, durations_s[k], m_sel),
-                     steps.jump(costs[k], dev, prev[k], durations_s[k], j_sel)]
+        cand = np.concatenate([terms.mono(k, costs[k], m_sel), terms.jump(k, costs[k], j_sel)])
         i = int(np.argmin(cand))
         if i < len(m_sel):
             nodes[k] = vias[k] = steps.m_src[m_sel[i]]
@@ -133,15 +145,17 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
 
 
 class StepCosts:
-    """The graph's steps split into mono steps and jumps, with their cost terms.
-
-    Forward pass and backtracking evaluate costs through the same two methods, so the
-    step chosen when backtracking reproduces the forward minimum exactly. The terms that
-    depend only on the beat's length (time warp, eq. 6's rate factor) are computed once
-    per distinct length and kept: a song's beat grid has few of them.
+    """The graph's steps split into mono steps and jumps, with the cost terms that do not depend
+    on the music, and the steps into and out of each node. Built once per graph and
+    configuration; a search's beats are priced by ``BeatTerms`` (no cache: a tracked song's
+    beats all differ in length).
     """
 
-    _KEEP = 256  # distinct beat lengths (or length ratios) remembered
+    #: Relax every jump (reduceat over all) once the reached nodes' jumps are this share of them:
+    #: the per-jump gather and minimum.at cost more than the dense pass from there on.
+    DENSE_SHARE = 0.25
+    #: Price every step of every beat at once (``BeatTerms``) up to this many (beats x jumps).
+    EVERY_STEP_MAX = 1 << 18
 
     def __init__(self, graph: MetaMotionGraph, jump_cost: float = 0.0, accent: AccentCosts | None = None):
         jump = graph.step_jump
@@ -168,40 +182,77 @@ class StepCosts:
         self.j_last = np.zeros(graph.n_nodes, dtype=np.int64)
         self.j_first[self.j_nodes] = self.j_starts
         self.j_last[self.j_nodes] = np.r_[self.j_starts[1:], len(self.j_dst)]
-        self._fixed: dict[float, tuple[np.ndarray, np.ndarray]] = {}
-        self._factor: dict[float, np.ndarray] = {}
+        # ... and its outgoing mono step (or -1) and jumps: the jumps by source, with each node's range.
+        self.mono_from = np.full(graph.n_nodes, -1)
+        self.mono_from[self.m_src] = np.arange(len(self.m_src))
+        self.j_by_src = np.argsort(self.j_src, kind="stable")
+        self.j_out = np.r_[0, np.cumsum(np.bincount(self.j_src, minlength=graph.n_nodes))]
 
-    def _fixed_terms(self, duration: float) -> tuple[np.ndarray, np.ndarray]:
-        """Per mono step and per jump: the static costs plus the time warp of a beat this long."""
-        got = self._fixed.get(duration)
-        if got is None:
-            if len(self._fixed) >= self._KEEP:
-                self._fixed.clear()
-            warp = np.zeros(len(self.mono_into))
-            if self.warp is not None:
-                warp = self.warp(self.log_s - np.log(duration))
-            got = self._fixed[duration] = (self.m_add + warp[self.m_src], self.j_add + warp[self.j_via])
-        return got
+    def leaving(self, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray | slice]:
+        """The mono steps and jumps out of ``nodes`` (sorted, unique); all jumps (a slice) when that
+        is most of them."""
+        mono = self.mono_from[nodes]
+        mono = mono[mono >= 0]
+        first, count = self.j_out[nodes], self.j_out[nodes + 1] - self.j_out[nodes]
+        total = int(count.sum())
+        if total > self.DENSE_SHARE * len(self.j_src):
+            return mono, slice(None)
+        # The concatenated ranges first[i] .. first[i] + count[i] of the jumps by source.
+        at = np.arange(total) + np.repeat(first - (np.cumsum(count) - count), count)
+        return mono, self.j_by_src[at]
 
-    def _rate_factors(self, prev_duration, duration) -> np.ndarray:
-        """Eq. (6)'s s times the jump's w2, per jump."""
-        ratio = duration / prev_duration if prev_duration is not None and prev_duration > 0 else np.nan
-        key = -1.0 if not np.isfinite(ratio) else float(ratio)
-        got = self._factor.get(key)
-        if got is None:
-            if len(self._factor) >= self._KEEP:
-                self._factor.clear()
-            got = self._factor[key] = _rate_factor(self.j_rho, None if key < 0 else 1.0, key) * self.j_w2
-        return got
 
-    def mono(self, prev_cost, dev, duration, sel=slice(None)):
-        """Cost of arriving by mono steps ``sel``: eq. (4), first case."""
-        return (prev_cost + dev)[self.m_src[sel]] + self._fixed_terms(duration)[0][sel]
+class BeatTerms:
+    """What each step costs on each beat of one search, but for the cost of the path that reaches
+    its source: eq. (4)'s intensity deviation (``deviation`` (K, N), per node's mono edge) with eq.
+    (6)'s rate factor times w2 for a jump, the time warp of playing the edge in the beat's length,
+    and the fixed costs of ``StepCosts``.
 
-    def jump(self, prev_cost, dev, prev_duration, duration, sel=slice(None)):
-        """Cost of arriving by jumps ``sel`` and their mono edge: eq. (4), second case."""
-        return prev_cost[self.j_src[sel]] + (dev[self.j_via[sel]] * self._rate_factors(prev_duration, duration)[sel]
-                                             + self._fixed_terms(duration)[1][sel])
+    On a small graph (K x jumps up to ``StepCosts.EVERY_STEP_MAX``) every step's terms for every
+    beat are found at once, a few large array operations instead of many small ones a beat, and
+    every step is relaxed. Else each beat's are found for the steps asked for. Forward pass and
+    backtracking both take costs from ``mono`` and ``jump``, element by element the same
+    operations either way, so backtracking reproduces the forward minimum exactly.
+    """
+
+    def __init__(self, steps: StepCosts, deviation: np.ndarray, durations_s: np.ndarray,
+                 prev_durations_s: np.ndarray):
+        self.steps, self.deviation = steps, deviation
+        k_beats, n = deviation.shape
+        # Eq. (6)'s ratio of each beat's length to the previous one's (-1: no previous beat).
+        ratio = [d / p if p > 0 else np.nan for d, p in zip(durations_s, prev_durations_s)]
+        self.ratio = np.array([-1.0 if not np.isfinite(r) else float(r) for r in ratio])
+        if steps.warp is None:
+            self.warp = np.zeros((k_beats, n))
+        else:
+            # ln of each beat's length, one by one (np.log of a scalar), against every edge's.
+            self.warp = steps.warp(steps.log_s - np.array([[float(np.log(d))] for d in durations_s]))
+        self.every_step = k_beats * len(steps.j_src) <= steps.EVERY_STEP_MAX
+        if self.every_step:
+            self._mono = steps.m_add + np.take(self.warp, steps.m_src, axis=1)
+            self._jump = self._jump_terms(None, slice(None))
+
+    def mono(self, k: int, prev_cost: np.ndarray, sel) -> np.ndarray:
+        """Cost of arriving by mono steps ``sel`` on beat ``k``: eq. (4), first case."""
+        s = self.steps
+        src = s.m_src[sel]
+        fixed = self._mono[k][sel] if self.every_step else s.m_add[sel] + self.warp[k][src]
+        return (prev_cost[src] + self.deviation[k][src]) + fixed
+
+    def jump(self, k: int, prev_cost: np.ndarray, sel) -> np.ndarray:
+        """Cost of arriving by jumps ``sel`` and their mono edge on beat ``k``: eq. (4), second case."""
+        terms = self._jump[k][sel] if self.every_step else self._jump_terms(k, sel)
+        return prev_cost[self.steps.j_src[sel]] + terms
+
+    def _jump_terms(self, k: int | None, sel) -> np.ndarray:
+        """The terms of jumps ``sel`` on beat ``k`` (None: on every beat, (K, jumps))."""
+        s = self.steps
+        via, rho, w2 = s.j_via[sel], s.j_rho[sel], s.j_w2[sel]
+        rows, ratio = (slice(None), self.ratio[:, None]) if k is None else (k, self.ratio[k])
+        deviation, warp = np.take(self.deviation[rows], via, axis=-1), np.take(self.warp[rows], via, axis=-1)
+        # s * w2, with s = 1 where there is no previous beat.
+        factor = np.where(ratio < 0, w2, _rate_factor(rho, 1.0, np.where(ratio < 0, 1.0, ratio)) * w2)
+        return deviation * factor + (s.j_add[sel] + warp)
 
 
 def path_cost(graph: MetaMotionGraph, path: Path, intensity_z, durations_s, prev_duration_s=None) -> float:
