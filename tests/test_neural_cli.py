@@ -73,26 +73,35 @@ def test_missing_and_corrupt_weights(tmp_path):
         load_model(cut)
 
 
-def test_corrupt_user_model_fails_the_dance_cleanly(tmp_path, music, capsys):
-    user = tmp_path / "cache" / "models" / "neural"
-    user.mkdir(parents=True)
-    (user / "salsa.pt").write_bytes(b"\0" * 64)
-    assert main(["dance", SONG, "--engine", "neural", "-o", str(tmp_path / "x.bvh")]) == 1
+def test_a_corrupt_model_of_the_user_fails_the_dance_cleanly(tmp_path, capsys):
+    bad = tmp_path / "salsa.pt"
+    bad.write_bytes(b"\0" * 64)
+    assert main(["dance", SONG, "--model", str(bad), "-o", str(tmp_path / "x.bvh")]) == 1
     err = capsys.readouterr().err
     assert "corrupt" in err and "Traceback" not in err
     assert not (tmp_path / "x.bvh").exists()
+    assert main(["dance", SONG, "--model", str(tmp_path / "none.pt"), "-o", str(tmp_path / "x.bvh")]) == 2
+    assert "no such file" in capsys.readouterr().err
+    assert main(["dance", SONG, "--model", str(bad), "--engine", "global", "-o", str(tmp_path / "x.bvh")]) == 2
+    assert "implies --engine neural" in capsys.readouterr().err
 
 
-def test_train_cli_tiny_writes_a_loadable_model(tmp_path, capsys):
-    out = tmp_path / "models"
-    assert main(["train", "--config", "tiny", "--minutes", "0.2", "--out", str(out), "-q"]) == 0
+def test_training_never_replaces_the_shipped_model_and_every_dance_names_its_weights(tmp_path, capsys, music):
+    assert main(["train", "--config", "tiny", "--minutes", "0.2", "-q"]) == 0   # into the user's cache
     text = capsys.readouterr().out
-    assert "wrote" in text and "loss" in text
-    model = load_model(out / "salsa.pt")
+    assert "wrote" in text and "loss" in text and "--model" in text
+    trained = tmp_path / "cache" / "models" / "neural" / "salsa.pt"
+    model = load_model(trained)
     assert model.genre == "salsa" and model.info["steps"] > 0
     assert model.info["final_loss"] < model.info["first_loss"]
-    assert (out / "salsa.json").is_file()
-    assert not list(out.glob("*.part"))
+    assert trained.with_suffix(".json").is_file() and not list(trained.parent.glob("*.part"))
+    shipped = dance(music, engine="neural", seed=1).provenance.summary
+    assert shipped["model"] == str(SHIPPED / "salsa.pt") and "(shipped)" in shipped["model_name"]
+    mine = dance(music, model=trained, seed=1).provenance.summary   # --model implies the neural engine
+    assert mine["engine"] == "neural" and mine["model"] == str(trained) and "tiny (yours)" in mine["model_name"]
+    assert mine["model_sha256"] != shipped["model_sha256"] and len(mine["model_sha256"]) == 16
+    assert main(["dance", SONG, "--model", str(trained), "-o", str(tmp_path / "m.bvh")]) == 0
+    assert f"sha256 {mine['model_sha256']}" in capsys.readouterr().out
 
 
 def test_train_bad_input(tmp_path, capsys):

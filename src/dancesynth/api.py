@@ -40,14 +40,22 @@ class DanceConfig:
     motif_at: tuple = ()                # choreography: ("12.0=M17", ...) or ((12.0, 17), ...); see docs/choreography.md
     recreate: str | Path | None = None  # choreography: a reference BVH whose motif sequence to re-create
     follow_signature: bool = False      # streaming: also keep the genre's motif signature (engines/graph/signature.py)
+    model: str | None = None            # neural: the weights to dance with (a .pt of 'dancesynth train'); None:
+                                        # the shipped model of the style's genre
 
     def __post_init__(self):
         # Choreography constraints: one "12.0=M17" string or a sequence of them / of (seconds, motif) pairs.
         object.__setattr__(self, "motif_at", (self.motif_at,) if isinstance(self.motif_at, str)
                            else tuple(self.motif_at))
         constrained = bool(self.motif_at) or self.recreate is not None
+        if self.model is not None:
+            object.__setattr__(self, "model", str(self.model))
         if self.engine is None:
-            object.__setattr__(self, "engine", "choreography" if constrained else "streaming")
+            object.__setattr__(self, "engine", "choreography" if constrained else
+                               "neural" if self.model is not None else "streaming")
+        if self.model is not None and self.engine != "neural":
+            raise InputError(f"--model names weights of the neural engine, not of '{self.engine}': leave out "
+                             "--engine (--model implies --engine neural)")
         if constrained and self.engine != "choreography":
             raise InputError(f"--motif-at and --recreate need the choreography engine, not '{self.engine}': "
                              "leave out --engine (they imply --engine choreography)")

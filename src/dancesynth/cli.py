@@ -102,6 +102,8 @@ def dance(song, output, character, bone_map, database, report_path, quiet, **opt
                    + (f", {s['plan_followed']:.0%} of beats as planned" if s.get("plan_followed") is not None else "")
                    + (f", {s['constraints']} constraint(s)" if s.get("constraints") else "")
                    + (f", re-creating {s['recreate']}" if s.get("recreate") else ""))
+    if s.get("model_sha256"):
+        click.echo(f"model     {s['model_name']}, sha256 {s['model_sha256']}: {s['model']}")
     # The choreography and neural engines spend the graph's stage on motifs and on loading the model.
     stage = {"choreography": "motifs", "neural": "model"}.get(s["engine"], "graph")
     cached = " (cached)" if stage == "graph" and s["graph_cached"] else ""
@@ -348,6 +350,7 @@ def train(style, config_name, device, minutes, out_dir, seed, database, quiet):
                f"{info['steps']} steps in {info['train_s']:.0f} s on {info['device']}")
     click.echo(f"loss      {info['first_loss']:.3f} -> {info['final_loss']:.3f}{held}")
     click.echo(f"wrote     {info['path']}")
+    click.echo(f"dance     with it: dancesynth dance SONG --model {info['path']} (the shipped model stays the default)")
 
 
 @cli.command()

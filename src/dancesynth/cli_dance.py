@@ -30,6 +30,9 @@ _OPTIONS = [
                       "the music's loudness more closely, its feet slide a little more (docs/accents.md)."),
     click.option("--fps", type=float, default=DEFAULT_FPS, show_default=True, help="Frame rate of the output."),
     click.option("--seed", type=int, default=None, help="Vary the dance between runs (default: deterministic)."),
+    click.option("--model", type=click.Path(dir_okay=False, path_type=Path),
+                 help="Neural engine: dance with these weights (a .pt from 'dancesynth train'; implies --engine "
+                      "neural). Default: the model shipped for the style's genre."),
     click.option("--database", type=click.Path(file_okay=False, path_type=Path),
                  help="A database folder or a folder of BVH files (default: the bundled database)."),
     click.option("--max-minutes", type=float, default=MAX_SONG_S / 60, show_default=True,
@@ -50,13 +53,13 @@ def dance_options(command):
 
 
 def dance_config(*, style, engine, recreate, motif_at, follow_signature, segment_seconds, lookahead, fps, seed,
-                 max_minutes, ths, thr, paper):
+                 max_minutes, ths, thr, paper, model):
     """The ``DanceConfig`` the options of ``dance_options`` ask for."""
     from .api import DanceConfig
 
     config = DanceConfig(style=style, engine=engine, segment_s=segment_seconds, lookahead_s=lookahead, fps=fps,
                          seed=seed, max_duration_s=max_minutes * 60.0, motif_at=motif_at, recreate=recreate,
-                         follow_signature=follow_signature)
+                         follow_signature=follow_signature, model=model)
     from .engines.graph.engine import EngineConfig
     from .engines.graph.meta_graph import GraphConfig
 

@@ -69,6 +69,8 @@ def batch(songs=(), out_dir="dances", *, list_file=None, folder=None, format: st
     config = config or DanceConfig()
     if overrides:
         config = replace(config, **overrides)
+    if config.model is not None:   # a worker, a Ray actor above all, may run in another folder
+        config = replace(config, model=os.path.abspath(config.model))
     suffix = check_format(Path("x." + str(format).lstrip(".")))
     if workers is not None and not (isinstance(workers, int) and 1 <= workers <= 4096):
         raise InputError(f"--workers {workers!r}: give a whole number of worker processes from 1 to 4096")

@@ -14,10 +14,11 @@ from __future__ import annotations
 
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
-from ...errors import ModelError
+from ...errors import InputError, ModelError
 from ...kinematics import fk
 from ...motion.beats import kinematic_beats, summed_speed
 from ...motion.database import MotionDatabase
@@ -30,7 +31,7 @@ from ..beatgrid import beat_grid, fit_style, fit_summary
 from ..footlock import FootLockState, lock_feet
 from ..stitch import Rendered
 from .data import TRAIN_FPS, beat_features, beat_phase, decode_pose, hamming_weights, music_vectors
-from .store import StoredModel, find_model, load_model
+from .store import StoredModel, find_model, load_model, model_id
 
 DEFAULT_GENRE = "salsa"   # the genre of the shipped model
 
@@ -145,9 +146,13 @@ def generate(model: StoredModel, music: MusicFeatures, grid, motifs: np.ndarray,
 def neural_dance(music: MusicFeatures, db: MotionDatabase, config, *, timings: dict) -> tuple[MotionClip, EngineRun]:
     """``api.dance`` for ``config.engine == "neural"``: choose style and model, generate, summarise."""
     t = time.perf_counter()
-    fit = replace(fit_style(db, music, config.style or DEFAULT_GENRE), forced=config.style is not None)
+    if config.model is not None and not Path(config.model).is_file():
+        raise InputError(f"--model {config.model}: no such file (a .pt written by 'dancesynth train')")
+    chosen = load_model(config.model) if config.model is not None else None   # the user's: --model PATH
+    genre = config.style or (chosen.genre if chosen is not None else DEFAULT_GENRE)
+    fit = replace(fit_style(db, music, genre), forced=config.style is not None)
     style, subdivide = fit.style, fit.subdivide
-    model = load_model(find_model(style.genre))
+    model = chosen if chosen is not None else load_model(find_model(style.genre))
     if model.skeleton.names != style.skeleton.names:
         raise ModelError(f"the neural model {model.path} was trained on another skeleton than style "
                          f"'{style.name}'; retrain it with 'dancesynth train --style {style.genre}'")
@@ -162,6 +167,6 @@ def neural_dance(music: MusicFeatures, db: MotionDatabase, config, *, timings: d
     run = EngineRun(style=style.name, genre=style.genre, style_fingerprint=style.fingerprint, subdivide=subdivide,
                     grid_times_s=grid.times_s, warp_rates=clip.meta["warp_rates"], step_s=(timings["synthesis_s"],),
                     motifs={"motif_plan": motifs}, fit=fit_summary(fit, music, None),
-                    extra={"graph_cached": True, "model": str(model.path),
+                    extra={"graph_cached": True, **model_id(model),
                            "realtime_factor": music.duration_s / max(timings["synthesis_s"], 1e-9)})
     return clip, run

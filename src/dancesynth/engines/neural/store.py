@@ -3,8 +3,10 @@
 A model is one ``<genre>.pt`` file (torch's zip format, loaded with
 ``weights_only=True``: tensors and plain values, never pickled code) with a
 ``<genre>.json`` beside it saying how it was trained (config, data, loss curve).
-Models trained with ``dancesynth train`` go to the user cache and take precedence
-over the ones shipped in ``dancesynth/data/models/neural``.
+``dance --engine neural`` uses the model shipped in ``dancesynth/data/models/neural``
+unless the user names another (``dance --model PATH``): training one (``dancesynth
+train``, by default into the user cache) never silently changes later dances. Every
+dance records which weights made it (``model_id``: name and content hash).
 """
 
 from __future__ import annotations
@@ -30,13 +32,23 @@ def user_dir() -> Path:
 
 
 def find_model(genre: str) -> Path:
-    """The model file for ``genre``: the user's own (``dancesynth train``) or the shipped one."""
-    for folder in (user_dir(), SHIPPED):
-        if (folder / f"{genre}.pt").is_file():
-            return folder / f"{genre}.pt"
+    """The shipped model file for ``genre``."""
+    if (SHIPPED / f"{genre}.pt").is_file():
+        return SHIPPED / f"{genre}.pt"
     shipped = sorted(p.stem for p in SHIPPED.glob("*.pt"))
-    raise ModelError(f"no neural model for genre '{genre}' (shipped: {', '.join(shipped) or 'none'}); "
-                     f"train one with 'dancesynth train --style {genre}' or dance another style")
+    raise ModelError(f"no neural model is shipped for genre '{genre}' (shipped: {', '.join(shipped) or 'none'}); "
+                     f"train one with 'dancesynth train --style {genre}' and dance with --model, or dance another "
+                     "style")
+
+
+def model_id(model: "StoredModel") -> dict:
+    """Which weights made a dance: where they are, a readable name and a hash of the file's bytes."""
+    import hashlib
+
+    digest = hashlib.sha256(Path(model.path).read_bytes()).hexdigest()[:16]
+    config = model.info.get("config", {}).get("name", "?")
+    where = "shipped" if Path(model.path).resolve().parent == SHIPPED.resolve() else "yours"
+    return {"model": str(model.path), "model_name": f"{model.genre}-{config} ({where})", "model_sha256": digest}
 
 
 @dataclass
