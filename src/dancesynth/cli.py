@@ -293,13 +293,9 @@ def eval_(dance_path, song, json_path, plot_path, plot_from, plot_length, refere
 def bench(quick, out_dir):
     """Benchmarks: synthesis time (Xu Fig. 4), scaling, quality table, beat tracking on generated songs."""
     from .bench.run import format_bench, run_bench
+    from .io.files import output_folder
 
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputError(f"--out {out_dir} is a file; give a folder for bench.json")
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"cannot write {out_dir}: {exc.strerror or exc}") from None
+    output_folder(out_dir, "bench.json")
     result = run_bench(quick=quick, out_dir=out_dir, progress=lambda msg: click.echo(msg, err=True))
     click.echo(format_bench(result))
     click.echo(f"wrote {out_dir / 'bench.json'}")

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Callable
 
 from ..errors import InputError
+from ..io.files import output_folder
 from .manifest import Manifest, settings_key
 from .songs import Job, collect_songs, plan_jobs
 from .worker import BatchSettings
@@ -78,7 +79,7 @@ def batch(songs=(), out_dir="dances", *, list_file=None, folder=None, format: st
                              character=None if character is None else str(character),
                              bone_map=None if bone_map is None else str(bone_map), evaluate=evaluate, report=report,
                              threads=thread_count() if threads is None else int(threads))
-    out_dir = _output_folder(Path(os.path.abspath(out_dir)))
+    out_dir = output_folder(os.path.abspath(out_dir), "the dances")
     _check_settings(settings)
     jobs = plan_jobs(collect_songs(songs, list_file=list_file, folder=folder), suffix)
     manifest = Manifest(out_dir)
@@ -116,19 +117,6 @@ def _records(jobs: list[Job], settings: BatchSettings, out_dir: Path, workers, r
     from .ray_runner import AUTO, run_ray
 
     return run_ray(jobs, settings, out_dir, workers, AUTO if ray is True else str(ray))
-
-
-def _output_folder(out_dir: Path) -> Path:
-    """``out_dir``, created if needed; a clear error if it is a file or cannot be written."""
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputError(f"output folder {out_dir} is a file; give a folder for the dances")
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"cannot create output folder {out_dir}: {exc.strerror}") from None
-    if not os.access(out_dir, os.W_OK | os.X_OK):
-        raise InputError(f"cannot write to output folder {out_dir}: permission denied")
-    return out_dir
 
 
 def _check_settings(settings: BatchSettings) -> None:

@@ -75,6 +75,21 @@ def atomic_folder(path):
         raise
 
 
+def output_folder(path, what: str) -> Path:
+    """``path`` as a folder to write ``what`` into, created if needed; a clear error if it is a file,
+    cannot be created or cannot be written to."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise InputError(f"output folder {path} is a file; give a folder for {what}")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create output folder {path}: {exc.strerror or exc}") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise InputError(f"cannot write to output folder {path}: permission denied")
+    return path
+
+
 def stop_cleanly_on_sigterm() -> None:
     """SIGTERM (``kill``, a service manager, a container stopping) ends the process as an exception
     would, so half-written outputs are removed on the way out (by default it kills outright and
