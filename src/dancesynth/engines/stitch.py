@@ -31,6 +31,7 @@ import numpy as np
 
 from .. import rotations as rot
 from ..errors import InputError
+from ..kinematics import fk
 from ..motion.database import Style
 from ..motion.resample import sample_frames
 from ..motion.roles import JointRoles, find_roles
@@ -513,14 +514,11 @@ def _feet_steps(style: Style, ankles, jumps: list, old, new):
         chains[side] = chain[::-1]  # from the root's child down to the ankle
     joints = sorted({j for c in chains.values() for j in c})
     column = {j: c for c, j in enumerate(joints)}
-    # Global rotations down to the ankles' parents, as kinematics.fk finds them (its positions are
-    # summed below instead, from the roots), and each joint's bone turned by its parent's.
+    # Global rotations down to the ankles by kinematics.fk (its positions are summed below instead,
+    # from the roots), and each joint's bone turned by its parent's.
     poses = np.concatenate([old, new])
-    g_rot = {}
-    for j in sorted({sk.parents[j] for j in joints}):  # parents before children
-        p = sk.parents[j]
-        g_rot[j] = poses[:, j] if p < 0 else rot.mul(g_rot[p], poses[:, j])
-    bones = rot.apply(np.stack([g_rot[sk.parents[j]] for j in joints], axis=1), sk.offsets[joints])
+    g_rot, _ = fk(poses, np.zeros(poses.shape[:-2] + (3,)), sk.offsets, sk.parents, only=[ankles[s] for s in sides])
+    bones = rot.apply(g_rot[:, [sk.parents[j] for j in joints]], sk.offsets[joints])
     bones = bones.reshape(2, len(jumps), len(joints), 3)  # (old/new, jump, joint, 3)
 
     def feet(i, old_root, new_root, on):
