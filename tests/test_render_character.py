@@ -19,7 +19,8 @@ from dancesynth import rotations as rot
 from dancesynth.errors import InputError
 from dancesynth.export import render_video, render_video_files
 from dancesynth.export import render as render_mod
-from dancesynth.export.render import COLOURS, FrameRenderer, _smooth_lines, _upsample, clip_pose
+from dancesynth.export.raster import smooth_lines, upsample
+from dancesynth.export.render import COLOURS, FrameRenderer, clip_pose
 from dancesynth.export.skinned import SkinnedMesh, paint, rasterise
 from dancesynth.retarget.character import Character, Mesh
 from dancesynth.retarget.rigs import rig_skeleton
@@ -275,13 +276,13 @@ def test_grid_lines_are_one_pixel_wide_at_any_slope_and_stay_on_the_picture():
     for end in [(60, 20.0), (60, 45.0), (35, 70), (20.5, 75)]:  # from level to steep
         img = np.full((80, 80), int(base), np.uint8)
         start = np.array([[20.0, 20.0]])
-        _smooth_lines(img, start, np.array([end], float), np.array([100.0]), base)
+        smooth_lines(img, start, np.array([end], float), np.array([100.0]), base)
         dark = (base - img.astype(float)) / 100.0  # 1 where a pixel is wholly covered
         length = float(np.hypot(*(np.array(end) - start[0])))
         assert dark.sum() == pytest.approx(length, rel=0.1)  # area = length x 1 pixel
         assert dark.max() <= 1.0 + 1e-6
     img = np.full((40, 40), 200, np.uint8)  # lines that leave the picture, or never enter it
-    _smooth_lines(img, np.array([[-50.0, 10.0], [10.0, -30.0], [-10.0, -10.0]]),
+    smooth_lines(img, np.array([[-50.0, 10.0], [10.0, -30.0], [-10.0, -10.0]]),
                   np.array([[90.0, 30.0], [15.0, 90.0], [-5.0, -40.0]]), np.array([50.0, 50.0, 50.0]), 200.0)
     assert (img < 200).sum() > 60
 
@@ -290,7 +291,7 @@ def test_grid_lines_are_one_pixel_wide_at_any_slope_and_stay_on_the_picture():
 @pytest.mark.parametrize("factor", [1, 2, 3])
 def test_upsampling_makes_each_pixel_a_block(dtype, factor):
     a = np.arange(35).reshape(5, 7).astype(dtype) * 3
-    np.testing.assert_array_equal(_upsample(a, factor), a.repeat(factor, axis=0).repeat(factor, axis=1))
+    np.testing.assert_array_equal(upsample(a, factor), a.repeat(factor, axis=0).repeat(factor, axis=1))
 
 
 def raised_dance(character: Character) -> MotionClip:

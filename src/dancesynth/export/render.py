@@ -1,4 +1,5 @@
-"""A small software renderer for dance videos: numpy projection and rasterisation, PIL for discs and thick lines.
+"""A small software renderer for dance videos: numpy projection and rasterisation, PIL for discs and thick lines
+(the pixel helpers are in ``raster``).
 
 The scene is the dancer on a floor grid with a line every 0.5 m, seen by a perspective
 camera at a fixed elevation from a 3/4 front view. The dancer is a character's skinned
@@ -30,6 +31,7 @@ from ..errors import ModelError
 from ..kinematics import fk
 from ..motion.roles import find_roles
 from ..types import MotionClip
+from .raster import box_reduce, disc, image_planes, luma, pack, packed_image, smooth_lines, to_ycbcr, unpack, upsample
 from .skinned import rasterise
 
 SUPERSAMPLE = 2              # draw at 2x, box-filter down: cheap anti-aliasing ...
@@ -51,7 +53,6 @@ GRID_MINOR = (200, 200, 202)  # every 0.5 m
 GRID_MAJOR = (172, 173, 178)  # every 1 m
 SHADOW = (206, 205, 203)
 PIX_FMTS = ("rgb24", "yuv420p")
-_BT601 = np.array([[65.481, 128.553, 24.966], [-37.797, -74.203, 112.0], [112.0, -93.786, -18.214]])
 COLOURS = {"l": (40, 110, 210), "r": (226, 92, 46), "": (72, 78, 92)}
 HEAD = (96, 102, 116)
 
@@ -280,10 +281,10 @@ class FrameRenderer:
         right = np.cross([0.0, 1.0, 0.0], back)
         right /= np.linalg.norm(right)
         self.basis = (right, np.cross(back, right), back)
-        self._colours = _to_ycbcr if pix_fmt == "yuv420p" else (lambda rgb: np.asarray(rgb, dtype=np.float64))
+        self._colours = to_ycbcr if pix_fmt == "yuv420p" else (lambda rgb: np.asarray(rgb, dtype=np.float64))
         self.shades = None
         if mesh is not None:
-            self.shades = mesh.shades if pix_fmt == "rgb24" else _pack(self._colours(_unpack(mesh.shades)))
+            self.shades = mesh.shades if pix_fmt == "rgb24" else pack(self._colours(unpack(mesh.shades)))
         self._prepare_background()
 
     def camera(self, frame: int) -> Camera:
@@ -306,32 +307,32 @@ class FrameRenderer:
         t = np.clip(rows / max(horizon, 1.0), 0.0, 1.0)[:, None]
         sky = np.array(SKY_TOP) * (1 - t) + np.array(SKY_HORIZON) * t
         col = np.where((rows < horizon)[:, None], sky.round(), np.array(FLOOR, dtype=np.float64))
-        self.band_packed = np.ascontiguousarray(np.broadcast_to(_pack(self._colours(col))[:, None], (band * s, w)))
-        band_out = _reduce(_image(self.band_packed), s)
+        self.band_packed = np.ascontiguousarray(np.broadcast_to(pack(self._colours(col))[:, None], (band * s, w)))
+        band_out = box_reduce(packed_image(self.band_packed), s)
         if self.pix_fmt == "yuv420p":
-            self.band_yuv = _planes(band_out)
+            self.band_yuv = image_planes(band_out)
         else:
             self.band_rgb = band_out.convert("RGB")
 
         # The floor holds luma (BT.601, limited range); its colours lie on the line from the floor's
         # colour to the major grid lines', so a luma value says which colour it is.
-        self.floor_y = float(_luma(FLOOR))
+        self.floor_y = float(luma(FLOOR))
         self.floor = np.full((self.height, self.width), int(round(self.floor_y)), np.uint8)
         level = np.arange(256, dtype=np.float64)
-        along = (self.floor_y - level) / (self.floor_y - float(_luma(GRID_MAJOR)))
+        along = (self.floor_y - level) / (self.floor_y - float(luma(GRID_MAJOR)))
         floor_rgb = np.clip(np.array(FLOOR, float) + along[:, None] * (np.array(GRID_MAJOR, float) - FLOOR), 0, 255)
         if self.pix_fmt == "yuv420p":
-            ycc = _to_ycbcr(floor_rgb)
+            ycc = to_ycbcr(floor_rgb)
             ycc[:, 0] = level  # the floor's value is the luma itself
-            self.floor_packed = _pack(ycc)
+            self.floor_packed = pack(ycc)
             self.floor_uv = [np.clip(np.rint(ycc[:, k]), 0, 255).astype(np.uint8) for k in (1, 2)]
         else:
-            self.floor_packed = _pack(floor_rgb)
+            self.floor_packed = pack(floor_rgb)
             self.floor_palette = np.rint(floor_rgb).astype(np.uint8).tobytes()
 
     def _ink(self, rgb) -> int:
         """An sRGB colour (3,) as a packed ink in this renderer's colour space."""
-        return int(_pack(self._colours(rgb)))
+        return int(pack(self._colours(rgb)))
 
     # ---------------------------------------------------------------- frames
 
@@ -377,13 +378,13 @@ class FrameRenderer:
             return floor, None, None
         canvas = self._underlay(box, floor)
         if posed is None:
-            img = _image(canvas)
+            img = packed_image(canvas)
             self._draw_figure(ImageDraw.Draw(img), cam, points, box[:2])
         else:
             rasterise(canvas, self.mesh, posed, self.shades, box[:2])
-            img = _image(canvas)
+            img = packed_image(canvas)
         s = self.supersample
-        return floor, tuple(v // s for v in box), _reduce(img, s)
+        return floor, tuple(v // s for v in box), box_reduce(img, s)
 
     def _rgb(self, floor: np.ndarray, box, patch) -> Image.Image:
         img = Image.frombuffer("L", (self.width, self.height), floor, "raw", "L", 0, 1)
@@ -407,7 +408,7 @@ class FrameRenderer:
                 plane[:len(band)] = band
         if patch is not None:
             x0, y0 = box[0], box[1]
-            for k, part in enumerate(_planes(patch)):
+            for k, part in enumerate(image_planes(patch)):
                 d = 1 if k == 0 else 2
                 planes[k][y0 // d:y0 // d + part.shape[0], x0 // d:x0 // d + part.shape[1]] = part
 
@@ -451,7 +452,7 @@ class FrameRenderer:
         if split > y0:
             out[:split - y0] = self.band_packed[y0:split, x0:x1]
         if y1 > split:
-            out[split - y0:] = _upsample(np.take(self.floor_packed, floor[split // s:y1 // s, x0 // s:x1 // s]), s)
+            out[split - y0:] = upsample(np.take(self.floor_packed, floor[split // s:y1 // s, x0 // s:x1 // s]), s)
         return out
 
     # ---------------------------------------------------------------- drawing
@@ -487,8 +488,8 @@ class FrameRenderer:
         uv0, uv1 = cam.to_pixels(c0[ok]) / s, cam.to_pixels(c1[ok]) / s
         alpha, major = alpha[keep][ok], major[keep][ok]
         # Each line darkens the floor's luma by its own colour's, faded into the floor's.
-        lines = np.where(major, float(_luma(GRID_MAJOR)), float(_luma(GRID_MINOR)))
-        _smooth_lines(floor, uv0, uv1, alpha * (self.floor_y - lines), self.floor_y)
+        lines = np.where(major, float(luma(GRID_MAJOR)), float(luma(GRID_MINOR)))
+        smooth_lines(floor, uv0, uv1, alpha * (self.floor_y - lines), self.floor_y)
 
     def _draw_shadow(self, floor: np.ndarray, cam: Camera, points: np.ndarray) -> None:
         """The shadow (thick bones straight down on the floor), drawn at the drawing scale in its box."""
@@ -510,15 +511,15 @@ class FrameRenderer:
         s = self.supersample
         x0, y0, x1, y1 = (v // s for v in box)
         under = floor[y0:y1, x0:x1]
-        img = Image.fromarray(_upsample(under, s))
+        img = Image.fromarray(upsample(under, s))
         d = ImageDraw.Draw(img)
         uv = (uv - box[:2]).tolist()
-        ink = int(round(float(_luma(SHADOW))))  # into the floor, as luma
+        ink = int(round(float(luma(SHADOW))))  # into the floor, as luma
         for (a, b), r in zip(bones.tolist(), radius.tolist()):
             w = max(1.0, 2 * r * px[b])
             d.line((*uv[a], *uv[b]), fill=ink, width=int(round(w)))
-            _disc(d, uv[b], w / 2, ink)
-        under[:] = np.asarray(_reduce(img, s))
+            disc(d, uv[b], w / 2, ink)
+        under[:] = np.asarray(box_reduce(img, s))
 
     def _draw_figure(self, d, cam: Camera, points: np.ndarray, offset=(0, 0)) -> None:
         """The stick figure, into the dancer's box whose top left corner is at ``offset`` (drawing pixels)."""
@@ -551,16 +552,16 @@ class FrameRenderer:
                 col = self._ink(fig.bone_colour[i] * (1 - f) + bg * f)
                 w = max(1.0, 2 * fig.bone_radius[i] * (px[pa] + px[pb]) / 2)
                 d.line((*uvl[pa], *uvl[pb]), fill=col, width=int(round(w)))
-                _disc(d, uvl[pa], w / 2, col)
-                _disc(d, uvl[pb], w / 2, col)
+                disc(d, uvl[pa], w / 2, col)
+                disc(d, uvl[pb], w / 2, col)
             elif kind == 1:
                 col = self._ink(fig.joint_colour[i] * (1 - fade[i]) + bg * fade[i])
-                _disc(d, uvl[i], fig.joint_radius[i] * px[i], col)
+                disc(d, uvl[i], fig.joint_radius[i] * px[i], col)
             else:
                 (u, v), = (cam.to_pixels(head_c[None]) - offset).tolist()
                 f = 0.35 * np.clip((head_c[2] - root_depth) / (0.5 * self.shot.body_height), 0.0, 1.0)
                 col = self._ink(np.array(HEAD, float) * (1 - f) + bg * f)
-                _disc(d, (u, v), fig.head_radius * self.focal / head_c[2], col)
+                disc(d, (u, v), fig.head_radius * self.focal / head_c[2], col)
 
 
 def _mesh_shadow(mesh, fig: Figure, skeleton) -> tuple[np.ndarray, np.ndarray]:
@@ -572,121 +573,6 @@ def _mesh_shadow(mesh, fig: Figure, skeleton) -> tuple[np.ndarray, np.ndarray]:
     radius = np.minimum(mesh.shadow_radii(rest, bones), MAX_SHADOW_RADIUS_M)
     keep = radius > 0
     return bones[keep], radius[keep]
-
-
-def _to_ycbcr(rgb) -> np.ndarray:
-    """BT.601 limited-range Y'CbCr (..., 3) of 8-bit sRGB colours (..., 3), as ffmpeg converts RGB for H.264."""
-    rgb = np.asarray(rgb, dtype=np.float64)
-    return np.array([16.0, 128.0, 128.0]) + rgb @ (_BT601.T / 255.0)
-
-
-def _luma(rgb) -> np.ndarray:
-    return _to_ycbcr(rgb)[..., 0]
-
-
-def _pack(c) -> np.ndarray:
-    """8-bit colours (..., 3) (rounded, clipped) packed in uint32, the first channel in the low byte (PIL's RGBX)."""
-    c = np.clip(np.rint(c), 0, 255).astype(np.uint32)
-    return c[..., 0] | c[..., 1] << 8 | c[..., 2] << 16
-
-
-def _unpack(packed: np.ndarray) -> np.ndarray:
-    return np.stack([packed & 255, packed >> 8 & 255, packed >> 16 & 255], axis=-1).astype(np.float64)
-
-
-def _image(packed: np.ndarray) -> Image.Image:
-    """An RGBX image over packed colours (H, W) uint32 (no copy; drawing on it copies)."""
-    return Image.frombuffer("RGBX", (packed.shape[1], packed.shape[0]), packed, "raw", "RGBX", 0, 1)
-
-
-def _reduce(img: Image.Image, factor: int) -> Image.Image:
-    """Box-filtered down by ``factor`` (the drawing scale to the output's)."""
-    return img.reduce(factor) if factor > 1 else img.copy()
-
-
-_WIDER = {np.dtype(np.uint8): (np.uint16, 0x0101), np.dtype(np.uint32): (np.uint64, 0x100000001)}
-
-
-def _upsample(a: np.ndarray, factor: int) -> np.ndarray:
-    """Each pixel of ``a`` (H, W) as a factor x factor block."""
-    if factor == 1:
-        return a.copy()
-    if factor != 2 or a.dtype not in _WIDER:
-        return a.repeat(factor, axis=0).repeat(factor, axis=1)
-    # Twice as wide: each pixel twice in a number of twice its size (4x faster than np.repeat), then each row twice.
-    wide, twice = _WIDER[a.dtype]
-    row = (a.astype(wide) * wide(twice)).view(a.dtype).reshape(a.shape[0], 2 * a.shape[1])
-    out = np.empty((2 * a.shape[0], 2 * a.shape[1]), a.dtype)
-    out[0::2] = row
-    out[1::2] = row
-    return out
-
-
-def _planes(img: Image.Image) -> list[np.ndarray]:
-    """The Y, Cb and Cr planes (uint8 arrays; Cb and Cr box-filtered to half size) of a Y'CbCr picture held
-    in an RGBX image of even size."""
-    half = img.reduce(2)
-    return [np.asarray(img.getchannel(0)), np.asarray(half.getchannel(1)), np.asarray(half.getchannel(2))]
-
-
-def _smooth_lines(img: np.ndarray, p0: np.ndarray, p1: np.ndarray, depth: np.ndarray, base: float) -> None:
-    """Anti-aliased lines, one pixel wide, from ``p0`` to ``p1`` (N, 2) pixels, into the luma image ``img``:
-    each darkens the pixels it covers from ``base`` by up to ``depth`` (N,), in proportion to the part of
-    each pixel it covers (a box filter); where lines cross, the darker wins."""
-    h, w = img.shape
-    steep = np.abs(p1[:, 1] - p0[:, 1]) > np.abs(p1[:, 0] - p0[:, 0])
-    for group, (ia, ib), strides, extents in (((~steep), (0, 1), (1, w), (w, h)), (steep, (1, 0), (w, 1), (h, w))):
-        _lines_along(img.reshape(-1), p0[group, ia], p1[group, ia], p0[group, ib], p1[group, ib], depth[group],
-                     base, strides, extents)
-
-
-def _lines_along(flat: np.ndarray, a0, a1, b0, b1, depth, base: float, strides, extents) -> None:
-    """``_smooth_lines`` of lines from (a0, b0) to (a1, b1) that run along a (x, or y for steep lines), with
-    |slope| <= 1: one sample per pixel along a; across (b), the pixels the line's cross-section covers (a line
-    1 pixel wide spans sqrt(1 + slope^2) pixels, so at most 3). ``strides``: a's and b's in ``flat``."""
-    flip = a1 < a0
-    a0, a1, b0, b1 = np.where(flip, a1, a0), np.where(flip, a0, a1), np.where(flip, b1, b0), np.where(flip, b0, b1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        slope = np.where(a1 - a0 > 1e-9, (b1 - b0) / (a1 - a0), 0.0)
-    # Only where the line is on the picture: a within it, and b within it (give or take 2 pixels).
-    with np.errstate(divide="ignore", invalid="ignore"):
-        enter, leave = (a0 + (edge - b0) / slope for edge in (-2.0, extents[1] + 2.0))
-    inside = (b0 >= -2) & (b0 <= extents[1] + 2)
-    start = np.where(slope > 0, enter, np.where(slope < 0, leave, np.where(inside, a0, np.inf)))
-    stop = np.where(slope > 0, leave, np.where(slope < 0, enter, np.where(inside, a1, -np.inf)))
-    first = np.clip(np.ceil(np.maximum(a0, start) - 0.5), 0, extents[0])
-    n = np.maximum(np.clip(np.ceil(np.minimum(a1, stop) - 0.5), 0, extents[0]) - first, 0).astype(np.int64)
-    total = int(n.sum())
-    if total == 0:
-        return
-    # One record per line, spread over its samples by a single np.repeat.
-    record = np.stack([np.cumsum(n) - n, first, b0 + (first + 0.5 - a0) * slope, slope,
-                       0.5 * np.sqrt(1.0 + slope * slope), depth], axis=1)
-    r = np.repeat(record.astype(np.float32), n, axis=0).T.copy()   # (6, samples)
-    k = np.arange(total, dtype=np.float32) - r[0]
-    b = r[2] + k * r[3]
-    lo, hi = b - r[4], b + r[4]
-    along = (r[1] + k) * strides[0]                                   # exact in float32 up to 4K pictures
-    pixel = np.floor(lo)
-    at = np.empty((3, total), np.int64)
-    value = np.empty((3, total), np.uint8)
-    for j in range(3):  # the pixels across, each as whole rows of 1-D work (broadcasting (3, n) is slow)
-        cover = np.minimum(hi, pixel + 1)
-        cover -= np.maximum(lo, pixel)
-        np.clip(cover, 0, 1, out=cover)
-        darker = np.rint(base - cover * r[5])
-        darker[(pixel < 0) | (pixel >= extents[1])] = 255          # off the picture: leaves it as it is
-        value[j] = darker
-        at[j] = along + np.clip(pixel, 0, extents[1] - 1) * strides[1]
-        pixel += 1
-    np.minimum.at(flat, at.ravel(), value.ravel())
-
-
-def _disc(d, centre, r: float, fill) -> None:
-    if r < 0.75:
-        return
-    u, v = centre
-    d.ellipse((u - r, v - r, u + r, v + r), fill=fill)
 
 
 def _clip_near(c0: np.ndarray, c1: np.ndarray):
