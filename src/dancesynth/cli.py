@@ -20,11 +20,10 @@ from .errors import DanceSynthError, InputError
 
 
 def _setup_env() -> None:
-    # librosa JIT-compiles with numba; a persistent cache saves seconds on every later run.
-    from .io.files import cache_dir, stop_cleanly_on_sigterm
+    from .io.files import stop_cleanly_on_sigterm, use_numba_cache
     from .threads import limit_threads
 
-    os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_dir() / "numba"))
+    use_numba_cache()
     limit_threads()  # before numpy loads: torch and BLAS at DANCESYNTH_THREADS (1) threads
     stop_cleanly_on_sigterm()
 

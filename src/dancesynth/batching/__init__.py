@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Callable
 
 from ..errors import InputError
-from ..io.files import output_folder
+from ..io.files import output_folder, use_numba_cache
 from .manifest import Manifest, settings_key
 from .songs import Job, collect_songs, plan_jobs
 from .worker import BatchSettings
@@ -89,7 +89,7 @@ def batch(songs=(), out_dir="dances", *, list_file=None, folder=None, format: st
     result = BatchResult(out_dir, manifest.path, skipped=len(jobs) - len(todo))
     if not todo:
         return result
-    os.environ.setdefault("NUMBA_CACHE_DIR", str(_numba_cache()))  # the workers inherit it
+    use_numba_cache()  # the workers inherit it
     t0 = time.perf_counter()
     try:
         for record in _records(todo, settings, out_dir, workers, ray):
@@ -127,9 +127,3 @@ def _check_settings(settings: BatchSettings) -> None:
 
     output_character(settings.character, settings.bone_map, settings.suffix)
     list_styles(settings.database)
-
-
-def _numba_cache() -> Path:
-    from ..io.files import cache_dir
-
-    return cache_dir() / "numba"
