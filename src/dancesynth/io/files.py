@@ -84,7 +84,7 @@ def output_folder(path, what: str) -> Path:
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise InputError(f"cannot create output folder {path}: {exc.strerror or exc}") from None
+        raise InputError(f"cannot write {path}: cannot create output folder ({exc.strerror or exc})") from None
     if not os.access(path, os.W_OK | os.X_OK):
         raise InputError(f"cannot write to output folder {path}: permission denied")
     return path
