@@ -1,6 +1,6 @@
 """Global structure (Aristidou et al.): how close each engine's dance is to its genre.
 
-Four measurements, all on the salsa genre (the one with enough dances for a template:
+Six measurements, all on the salsa genre (the one with enough dances for a template:
 26 clips; the neural model is trained on it):
 
 - **Table I**: chi2 (eq. 11) between a dance's motif signature and the salsa template,
@@ -17,6 +17,13 @@ Four measurements, all on the salsa genre (the one with enough dances for a temp
 - **Re-creation** (§5.5.1): each clip of one salsa style in turn is the reference,
   held out of the style, and re-created on a song; the share of beats whose motif
   equals the reference's -- as danced, and as found again in the output.
+- **Liveliness** (issue 16): per dance and per engine, beside the raw salsa clips (at
+  30 fps): frames with a wrist inside the head, root travel per minute, p99 joint
+  speed (both also / the mocap's), one-frame joint steps over 30°, the share of beats
+  whose motif found again equals the planned one, accent precision and recall / chance.
+- **Neural realism**: FID_k and FID_g of the neural and the streaming dances against the
+  salsa clips the neural model never saw (its ``held_out_clips``), the streaming engine
+  dancing from a database without them; and the neural generator's targets, pass or fail.
 """
 
 from __future__ import annotations
@@ -35,8 +42,12 @@ ENGINES = ("mocap", "streaming", "signature", "global", "random_walk", "choreogr
 TITLES = {"mocap": "raw mocap*", "streaming": "streaming (Xu)", "signature": "streaming + signature",
           "global": "global DP", "random_walk": "random walk", "choreography": "choreography mixer",
           "neural": "neural (acLSTM)"}
-METRIC_KEYS = ("hit_rate", "bas_music", "aligned_beat_ratio", "intensity_spearman", "transition_jump_vs_mocap_p99",
-               "jump_p99_vs_mocap", "jerk_vs_mocap", "foot_skate_m_s", "pfc")
+METRIC_KEYS = ("hit_rate", "bas_music", "aligned_beat_ratio", "accent_precision_x_chance", "accent_recall_x_chance",
+               "intensity_spearman", "transition_jump_vs_mocap_p99", "jump_p99_vs_mocap", "jerk_vs_mocap",
+               "foot_skate_m_s", "pfc")
+#: Per dance (and per mocap clip), what ``liveliness`` measures; engines' means beside the mocap's.
+LIVE_KEYS = ("hand_in_head", "root_travel_m_per_min", "joint_speed_p99", "one_frame_steps")
+MOCAP_FPS = 30.0  # the dances' frame rate: speeds and one-frame steps depend on it
 NOTES = ("chi2: eq. (11) between the signature of the motifs found again in the motion (cut at the beats it "
          "dances to, re-embedded, assigned) and the salsa template; 'danced': the motifs the engine chose, where "
          "it knows them",
@@ -58,6 +69,35 @@ def _chi2_ids(model, template, ids) -> float | None:
     ids = np.asarray(ids)
     ids = ids[ids >= 0]
     return chi2(template, np.bincount(ids, minlength=model.k)) if ids.size else None
+
+
+def liveliness(clip) -> dict:
+    """Hand in head (share of frames), root travel (m/min), p99 joint speed (m/s) and one-frame steps of a motion.
+
+    The speeds are ``motion_metrics``' own (as ``evaluate``'s ``root_travel_m_s`` and
+    ``joint_speed_p99_m_s``), from one forward kinematics shared with the head test.
+    """
+    from ..eval.artefacts import hand_in_head_frames, one_frame_steps
+    from ..eval.motion_metrics import joint_speeds, root_travel_speed
+    from ..kinematics import clip_fk
+
+    g_rot, g_pos = clip_fk(clip)
+    out = {"hand_in_head": hand_in_head_frames(clip, global_rot=g_rot, global_pos=g_pos),  # NaN: no head found
+           "root_travel_m_per_min": 60.0 * root_travel_speed(clip),
+           "joint_speed_p99": float(np.percentile(joint_speeds(clip, global_pos=g_pos), 99))}
+    return {**{k: v if np.isfinite(v) else None for k, v in out.items()},
+            "one_frame_steps": int(len(one_frame_steps(clip)))}
+
+
+def plan_followed(clip, found) -> float | None:
+    """Share of planned beats whose motif found again in the motion is the planned one (None: no plan)."""
+    motifs = clip.provenance.motifs
+    plan = motifs.get("motif_ids", motifs.get("motif_plan"))  # what the engine meant to dance on each beat
+    if plan is None:
+        return None
+    n = min(len(plan), len(found))
+    planned = np.asarray(plan[:n]) >= 0  # -1: a beat without a motif (no plan there)
+    return float(np.mean(np.asarray(found[:n])[planned] == np.asarray(plan[:n])[planned])) if planned.any() else None
 
 
 def engine_dances(music, db, seed: int, engines, style: str | None = GENRE) -> dict:
@@ -87,17 +127,22 @@ def engine_dances(music, db, seed: int, engines, style: str | None = GENRE) -> d
     return out
 
 
-def _engines(cfg: BenchConfig) -> tuple[str, ...]:
-    from ..engines.neural.store import SHIPPED
+def _engines(cfg: BenchConfig) -> tuple[tuple[str, ...], dict | None, str | None]:
+    """The engines to run; the neural model's info (None without it) and why it is left out (None if it runs)."""
+    names = [e for e in ENGINES if e != "mocap" and e in cfg.structure_engines]
+    info, why = None, None
+    if "neural" in names:
+        from ..errors import ModelError
 
-    names = [e for e in ENGINES if e != "mocap"]
-    try:
-        import torch  # noqa: F401 -- the neural engine needs it
-    except ImportError:
-        names.remove("neural")
-    if "neural" in names and not (SHIPPED / f"{GENRE}.pt").is_file():
-        names.remove("neural")
-    return tuple(n for n in names if n in cfg.structure_engines)
+        try:  # a missing or foreign model (or no torch) leaves the other engines' numbers
+            from ..engines.neural.store import SHIPPED, load_model
+
+            info = load_model(SHIPPED / f"{GENRE}.pt").info
+        except (ImportError, ModelError) as exc:
+            why = f"{type(exc).__name__}: {exc}"
+        if why:
+            names.remove("neural")
+    return tuple(names), info, why
 
 
 def mocap_chi2(db, model) -> list[dict]:
@@ -126,15 +171,18 @@ def structure(cfg: BenchConfig, db, progress: Progress | None = None, out_dir: P
 
     model = load_motif_model(db)
     template = model.templates[GENRE]
-    engines = _engines(cfg)
+    engines, neural_info, neural_skipped = _engines(cfg)
     mocap_rows = mocap_chi2(db, model)
-    refs = {st.name: [at_fps(st.clip(c), 30.0) for c in range(st.n_clips)] for st in db.styles_of(GENRE)}
+    refs = {st.name: [at_fps(st.clip(c), MOCAP_FPS) for c in range(st.n_clips)] for st in db.styles_of(GENRE)}
+    mocap_live = [{"clip": c.meta["name"], **liveliness(c)} for clips in refs.values() for c in clips]
+    live_ref = {k: _mean(r[k] for r in mocap_live) for k in LIVE_KEYS}
     songs = cfg.structure_songs or tuple(sorted(p.name for p in MUSIC_DIR.glob("*.ogg")))
-    per_dance = []
+    per_dance, danced_songs = [], []
     for i, song in enumerate(songs):
         music = load_song(song, cfg.structure_max_s)
         if music.duration_s < cfg.structure_min_s:
             continue
+        danced_songs.append((Path(song).name, music))
         for seed in range(cfg.structure_seeds):
             if progress:
                 progress(f"structure: {Path(song).name} ({i + 1}/{len(songs)}), seed {seed}")
@@ -146,11 +194,16 @@ def structure(cfg: BenchConfig, db, progress: Progress | None = None, out_dir: P
                                   transitions_s=jumps[(jumps >= 0) & (jumps <= clip.duration_s)],
                                   warp_rates=clip.provenance.warp_rates, mocap=refs[clip.provenance.style])
                 danced = clip.provenance.motifs.get("motif_ids")
+                live = liveliness(clip)
+                live.update(root_travel_vs_mocap=_ratio(live["root_travel_m_per_min"],
+                                                        live_ref["root_travel_m_per_min"]),
+                            joint_speed_p99_vs_mocap=_ratio(live["joint_speed_p99"], live_ref["joint_speed_p99"]),
+                            plan_followed=plan_followed(clip, found))
                 per_dance.append({"song": Path(song).name, "seed": seed, "engine": name, "style": clip.provenance.style,
                                   "duration_s": music.duration_s, "words": int(len(found)),
                                   "chi2": _chi2_ids(model, template, found),
                                   "chi2_danced": None if danced is None else _chi2_ids(model, template, danced),
-                                  "wall_s": clip.meta["bench_wall_s"],
+                                  "wall_s": clip.meta["bench_wall_s"], "liveliness": live,
                                   "scores": {k: scores.get(k) for k in METRIC_KEYS}})
     table_i = {"mocap": {"chi2": float(np.mean([r["chi2"] for r in mocap_rows])),
                          "chi2_danced": float(np.mean([r["chi2_in_sample"] for r in mocap_rows])),
@@ -164,10 +217,98 @@ def structure(cfg: BenchConfig, db, progress: Progress | None = None, out_dir: P
     mocap_metrics = _mocap_metrics(db, refs, cfg.mocap_max_clips)
     metrics = {"mocap": mocap_metrics}
     metrics.update({name: mean_scores([r["scores"] for r in per_dance if r["engine"] == name]) for name in engines})
-    return {"genre": GENRE, "k": model.k, "engines": ["mocap", *engines], "table_i": table_i, "dances": per_dance,
-            "mocap_clips": mocap_rows, "metrics": metrics,
-            "fig12": fig12(cfg, db, model, engines, progress, out_dir=out_dir),
-            "recreation": recreation(cfg, db, model, progress), "notes": list(NOTES)}
+    live = {"mocap": {**live_ref, "root_travel_vs_mocap": 1.0, "joint_speed_p99_vs_mocap": 1.0,
+                      "one_frame_steps_total": int(sum(r["one_frame_steps"] for r in mocap_live)),
+                      "dances": len(mocap_live), "plan_followed": None}}
+    for name in engines:
+        rows = [r["liveliness"] for r in per_dance if r["engine"] == name]
+        live[name] = {**mean_scores(rows), "one_frame_steps_total": int(sum(r["one_frame_steps"] for r in rows)),
+                      "dances": len(rows)}
+    for name in live:  # the accents beside chance, as the metrics table has them
+        live[name].update({k: metrics[name].get(k) for k in ("accent_precision_x_chance", "accent_recall_x_chance")})
+    s = {"genre": GENRE, "k": model.k, "engines": ["mocap", *engines], "table_i": table_i, "dances": per_dance,
+         "mocap_clips": mocap_rows, "metrics": metrics, "liveliness": live, "mocap_liveliness": mocap_live,
+         "neural_skipped": neural_skipped,
+         "neural_realism": neural_realism(cfg, db, neural_info, danced_songs, progress) if "neural" in engines
+         else {"skipped": "the neural engine " + ("could not run" if neural_skipped else "was not selected")},
+         "fig12": fig12(cfg, db, model, engines, progress, out_dir=out_dir),
+         "recreation": recreation(cfg, db, model, progress), "notes": list(NOTES)}
+    s["neural_targets"] = neural_targets(s)
+    return s
+
+
+# The neural generator's targets (issue 16): (name, how to read it from the section, lowest, highest).
+NEURAL_TARGETS = (
+    ("chi2 to the salsa template", lambda s: s["table_i"]["neural"]["chi2"], None, 0.30),
+    ("beats whose motif follows the plan", lambda s: s["liveliness"]["neural"]["plan_followed"], 0.5, None),
+    ("frames with a hand in the head", lambda s: s["liveliness"]["neural"]["hand_in_head"], None, 0.02),
+    ("root travel / mocap's", lambda s: s["liveliness"]["neural"]["root_travel_vs_mocap"], 0.7, 1.3),
+    ("p99 joint speed / mocap's", lambda s: s["liveliness"]["neural"]["joint_speed_p99_vs_mocap"], 0.7, 1.3),
+    ("one-frame joint steps > 30°, all dances", lambda s: s["liveliness"]["neural"]["one_frame_steps_total"],
+     None, 0),
+    ("FID_k / streaming's (held-out mocap)", lambda s: s["neural_realism"]["fid_k_ratio"], None, 1.5),
+    ("FID_g / streaming's (held-out mocap)", lambda s: s["neural_realism"]["fid_g_ratio"], None, 1.5),
+    ("accent precision / chance", lambda s: s["liveliness"]["neural"]["accent_precision_x_chance"], 2.0, None),
+    ("accent recall / chance", lambda s: s["liveliness"]["neural"]["accent_recall_x_chance"], 2.0, None),
+)
+
+
+def neural_targets(s: dict) -> dict:
+    """Each neural target: its value, bounds and whether it is met (None where this run did not measure it)."""
+    out = {}
+    for name, read, lo, hi in NEURAL_TARGETS:
+        try:
+            value = read(s)
+        except (KeyError, TypeError):
+            value = None
+        met = None if value is None else bool((lo is None or value >= lo) and (hi is None or value <= hi))
+        out[name] = {"value": value, "min": lo, "max": hi, "met": met}
+    return out
+
+
+def neural_realism(cfg: BenchConfig, db, info: dict | None, songs: list, progress) -> dict:
+    """FID_k / FID_g of the neural and the streaming dances against the salsa clips the neural model never saw.
+
+    The streaming engine dances from a database without those clips, so that neither
+    engine has seen the reference (``bench.realism`` does the same with random splits).
+    """
+    from ..errors import InputError
+    from ..eval.realism import realism_scores
+    from ..motion.database import MotionDatabase
+    from .realism import NOTE
+
+    held = set((info or {}).get("held_out_clips") or ())
+    if not held:
+        return {"skipped": "the neural model names no held-out clips"}
+    styles, reference = {}, []
+    for st in db.styles_of(GENRE):
+        out = [c for c in range(st.n_clips) if st.clip_names[c] in held]
+        reference += [at_fps(st.clip(c), MOCAP_FPS) for c in out]
+        for c in reversed(out):  # the last first: without_clip renumbers the clips after it
+            st = st.without_clip(c)
+        styles[st.name] = st
+    if not reference:
+        return {"skipped": f"held-out clips {sorted(held)} are not in this database"}
+    if not songs:
+        return {"skipped": "no song was danced"}
+    # The shipped motif model is kept (db.source): the streaming engine only counts motifs here.
+    only = MotionDatabase(styles, db.source)
+    generated = {"neural": [], "streaming": []}
+    for name, music in songs:
+        for seed in range(cfg.structure_seeds):
+            if progress:
+                progress(f"structure: neural realism on {name}, seed {seed}")
+            for engine, clip in engine_dances(music, only, seed, tuple(generated)).items():
+                generated[engine].append(clip)
+    try:
+        scores = realism_scores(generated, reference, window_s=cfg.realism_window_s)
+    except InputError as exc:  # too little held-out motion or too short songs for one window
+        return {"skipped": str(exc)}
+    keep = ("fid_k", "fid_g", "div_k", "div_g", "n_generated", "n_reference")
+    return {"held_out": [c.meta["name"] for c in reference], "reference_s": float(sum(c.duration_s for c in reference)),
+            "dances": len(generated["neural"]), "scores": {e: {k: scores[e][k] for k in keep} for e in scores},
+            "fid_k_ratio": _ratio(scores["neural"]["fid_k"], scores["streaming"]["fid_k"]),
+            "fid_g_ratio": _ratio(scores["neural"]["fid_g"], scores["streaming"]["fid_g"]), "note": NOTE}
 
 
 def _reduce(values, how=np.mean):
@@ -178,6 +319,10 @@ def _reduce(values, how=np.mean):
 
 def _mean(values):
     return _reduce(values)
+
+
+def _ratio(a, b) -> float | None:
+    return None if a is None or b is None or not b > 0 else float(a / b)
 
 
 def _mocap_metrics(db, refs: dict, max_clips: int | None) -> dict:
@@ -287,10 +432,62 @@ def format_structure(s: dict) -> str:
                           [f"plot: {f['plot']}"] if f.get("plot") else [])]
     out += ["", "Beat alignment, intensity and smoothness (mean over dances; mocap: its own motion beats)",
             format_table({TITLES[e]: s["metrics"][e] for e in s["engines"]})]
+    out += ["", format_liveliness(s)]
     r = s["recreation"]
     if r["rows"]:
         out += ["", table(f"Re-creation of held-out dances (§5.5.1): {r['style']} clips re-created on {r['song']}",
                           ["reference", "beats", "motif as danced", "found again in the motion"],
                           [[x["reference"], x["beats"], x["danced"], x["found_again"]] for x in r["rows"]]
                           + [["mean", None, r["danced_mean"], r["found_again_mean"]]], [0, 0, 2, 2])]
+    return "\n".join(out)
+
+
+PERCENT_TARGETS = ("beats whose motif follows the plan", "frames with a hand in the head")
+
+
+def _pct(v):
+    return None if v is None else 100.0 * v
+
+
+def format_liveliness(s: dict) -> str:
+    """The liveliness table, the neural realism beside the streaming engine's, and the neural targets."""
+    live = s["liveliness"]
+    keys = ("hand_in_head", "root_travel_m_per_min", "root_travel_vs_mocap", "joint_speed_p99",
+            "joint_speed_p99_vs_mocap", "one_frame_steps", "plan_followed", "accent_precision_x_chance",
+            "accent_recall_x_chance")
+    rows = [[TITLES[e], live[e]["dances"]] + [_pct(live[e].get(k)) if k in ("hand_in_head", "plan_followed")
+                                              else live[e].get(k) for k in keys] for e in s["engines"]]
+    notes = ["hand: a wrist within 8 cm of the head's centre; steps: isolated one-frame joint turns over 30° "
+             "(eval.artefacts), per dance; plan: beats whose motif found again equals the one the engine planned "
+             "(neural: motif_plan; signature-following engines: motif_ids)",
+             "* raw mocap: every salsa clip at 30 fps, mean per clip (its steps are capture glitches; accents "
+             "against its own motion beats)"]
+    if s.get("neural_skipped"):
+        notes.append(f"neural left out: {s['neural_skipped']}")
+    out = [table("Liveliness and artefacts (mean per dance)",
+                 ["engine", "dances", "hand in head %", "root m/min", "/ mocap", "p99 speed m/s", "/ mocap",
+                  "1-frame steps", "plan followed %", "precision / chance", "recall / chance"],
+                 rows, [0, 0, 2, 1, 2, 2, 2, 1, 1, 2, 2], notes)]
+    r = s["neural_realism"]
+    if "skipped" in r:
+        out += ["", f"Neural realism vs held-out mocap: skipped ({r['skipped']})"]
+    else:
+        sc = r["scores"]
+        body = [[TITLES[e]] + [sc[e][k] for k in ("fid_k", "fid_g", "div_k", "div_g", "n_generated")]
+                for e in ("neural", "streaming")]
+        body.append(["neural / streaming", r["fid_k_ratio"], r["fid_g_ratio"], None, None, None])
+        out += ["", table(f"Neural realism vs the salsa mocap it never saw ({', '.join(r['held_out'])}: "
+                          f"{r['reference_s']:.0f} s, {sc['neural']['n_reference']} windows), {r['dances']} dances "
+                          "per engine", ["generated", "FID_k", "FID_g", "Div_k", "Div_g", "windows"], body,
+                          [0, 2, 2, 2, 2, 0], ["streaming: from a database without the held-out clips", r["note"]])]
+    body = []
+    for name, t in s["neural_targets"].items():
+        scale = _pct if name in PERCENT_TARGETS else (lambda v: v)
+        lo, hi = scale(t["min"]), scale(t["max"])
+        bound = f"{lo:g}-{hi:g}" if lo is not None and hi is not None else (
+            f">= {lo:g}" if lo is not None else f"<= {hi:g}")
+        body.append([name + (" %" if name in PERCENT_TARGETS else ""), bound, scale(t["value"]),
+                     "-" if t["met"] is None else ("pass" if t["met"] else "FAIL")])
+    out += ["", table("Neural generator targets (issue 16)", ["target", "bound", "neural", "met"], body,
+                      [0, 0, 3, 0])]
     return "\n".join(out)
