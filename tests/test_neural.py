@@ -1,5 +1,7 @@
 """The learned pose generator's pieces: pose encoding, torch FK, windowed AdaIN, losses, overfitting."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -136,7 +138,7 @@ def test_torch_word_features_match_motion_words(style, clip30):
     poses = encode_pose(local[:200], root[:200], contacts[:200], TRAIN_FPS).astype(np.float64)
     body = Body(style.skeleton, TRAIN_FPS)
     body.offsets = body.offsets.double()
-    percept = Perceptual(body, words.landmark_indices(style.skeleton), torch.nn.Identity())
+    percept = Perceptual(body, words.landmark_indices(style.skeleton), torch.nn.Identity(), np.zeros((1, 1)))
     cut = torch.as_tensor([[0, a, b] for a, b in zip(beats[:-1], beats[1:])], dtype=torch.float64)
     ours = percept.features(torch.as_tensor(poses)[None], cut).numpy()
     assert ours.shape == ref.shape
@@ -161,3 +163,32 @@ def test_beat_warp_moves_generated_beats_onto_music_beats():
     assert rates.min() >= 0.67 and rates.max() <= 1.5
     t = np.linspace(-1, 12, 500)
     assert np.all(np.diff(_warp_positions(t, (am, ag))) > 0)   # time never runs backwards
+
+
+def test_each_frame_sees_its_motif_word_and_half_a_word_ahead_the_next_one():
+    from dancesynth.engines.neural.data import LOOKAHEAD, exemplar_samples
+    from dancesynth.motion.words import FEATURE_DIM, WORD_FRAMES
+
+    words = np.random.default_rng(0).normal(size=(3, WORD_FRAMES, FEATURE_DIM)).astype(np.float32)
+    k = np.array([0, 0, 0, 1, 2, 2])
+    phase = np.array([0.0, 0.25, 0.75, 0.5, 0.0, 0.9])
+    now, ahead = np.split(exemplar_samples(words, k, phase), 2, axis=1)
+    assert np.allclose(now[0], words[0, 0]) and np.allclose(now[1], words[0, 3])     # 0.25 of 12 intervals
+    assert np.allclose(now[3], words[1, 6])
+    assert LOOKAHEAD == 0.5
+    assert np.allclose(ahead[0], words[0, 6])                  # still in its own word
+    assert np.allclose(ahead[2], words[1, 3])                  # 0.75 + 0.5: a quarter into the next motif word
+    assert np.allclose(ahead[5], words[2, -1])                 # the last word looks at its own end
+
+
+def test_training_is_reproducible_on_the_tiny_config(tmp_path):
+    """Same data, config and seed -> the same weights; another seed -> other weights."""
+    from dancesynth.engines.neural.train import train
+
+    runs = [train("salsa", "tiny", steps=12, out=tmp_path / name, seed=seed)
+            for name, seed in (("a", 0), ("b", 0), ("c", 1))]
+    blobs = [torch.load(r["path"], weights_only=True)["state_dict"] for r in runs]
+    assert all(torch.equal(blobs[0][k], blobs[1][k]) for k in blobs[0])
+    assert not all(torch.equal(blobs[0][k], blobs[2][k]) for k in blobs[0])
+    assert [p["loss"] for p in runs[0]["curve"]] == [p["loss"] for p in runs[1]["curve"]]
+    assert Path(runs[0]["plot"]).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"     # the loss curve, as a picture

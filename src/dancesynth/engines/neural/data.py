@@ -14,7 +14,11 @@ Beside it every frame gets *conditioning* (what the network is told):
 
 - beat features from the motion's own beats (our mocap has no music): the phase
   within the current beat interval as (sin, cos), and the interval length;
-- the target motif: a one-hot of the motif of the motion word containing the frame;
+- the target motif as a *motif word* (the paper's motif representation): a real
+  motion word of the motif (``motion/words.py`` features: 14 landmarks relative to
+  the root and the root's velocity, 13 samples over the word), given to each frame
+  as its sample at the frame's phase and its sample half a word ahead, which in the
+  second half of a word is the *next* word's motif word (``exemplar_samples``);
 
 and every motion word gets a *music* vector for AdaIN, made of what a song gives as
 well as a dance (see docs/neural.md): the beat interval's intensity, z-scored within
@@ -33,12 +37,16 @@ from ... import rotations as rot
 from ...motion.database import Style
 from ...motion.features import interval_energy
 from ...motion.resample import resample_clip_arrays
+from ...motion.words import FEATURE_DIM, WORD_FRAMES, clip_words
+from ...types import MotionClip
 
 TRAIN_FPS = 30.0          # the generator works at 30 fps; output is resampled to the requested rate
 ROOT_DIMS = 4             # forward speed, sideways speed, turning speed, height
 MUSIC_DIMS = 3            # intensity z-score, its change, log beat length
 BEAT_DIMS = 3             # sin/cos of the beat phase, log beat length
 REF_BEAT_S = 0.5          # beat lengths are given as log(length / REF_BEAT_S)
+LOOKAHEAD = 0.5           # the second motif-word sample is half a word ahead
+COND_DIMS = BEAT_DIMS + 2 * FEATURE_DIM
 
 
 def pose_dims(n_joints: int) -> int:
@@ -148,6 +156,35 @@ def hamming_weights(phase: np.ndarray) -> np.ndarray:
     return (np.sin(np.pi * np.asarray(phase, dtype=np.float64)) ** 2).astype(np.float32)
 
 
+def exemplar_samples(exemplars: np.ndarray, k: np.ndarray, phase: np.ndarray) -> np.ndarray:
+    """(F, 2 * FEATURE_DIM): each frame's motif word at its phase, and half a word ahead.
+
+    ``exemplars`` (W, 13, D) holds one motif word per beat interval, ``k`` (F,) the
+    interval of each frame and ``phase`` (F,) its phase in it. Half a word ahead lies
+    in the next interval in the second half of a word: the network sees the next
+    motif coming (the last interval looks at its own end).
+    """
+    ex = np.asarray(exemplars, dtype=np.float32)
+    k, phase = np.asarray(k), np.asarray(phase, dtype=np.float64)
+
+    def at(kk, pp):
+        u = np.clip(pp, 0.0, 1.0) * (WORD_FRAMES - 1)
+        lo = np.minimum(np.floor(u).astype(np.int64), WORD_FRAMES - 2)
+        a = (u - lo)[:, None].astype(np.float32)
+        return ex[kk, lo] * (1.0 - a) + ex[kk, lo + 1] * a
+
+    ahead = phase + LOOKAHEAD
+    nxt = (ahead >= 1.0) & (k + 1 < len(ex))
+    k2 = np.where(nxt, k + 1, k)
+    p2 = np.where(nxt, ahead - 1.0, np.minimum(ahead, 1.0))
+    return np.concatenate([at(k, phase), at(k2, p2)], axis=1)
+
+
+def conditioning(phase, length_s, exemplars, k) -> np.ndarray:
+    """(F, COND_DIMS): beat features and motif-word samples of every frame."""
+    return np.concatenate([beat_features(phase, length_s), exemplar_samples(exemplars, k, phase)], axis=1)
+
+
 # ---------------------------------------------------------------------------------------------
 # Sequences of a style
 
@@ -158,46 +195,68 @@ class Sequence:
 
     name: str
     poses: np.ndarray        # (F, P) pose vectors
-    beat: np.ndarray         # (F, BEAT_DIMS)
+    phase: np.ndarray        # (F,) beat phase
+    length_s: np.ndarray     # (F,) length of the frame's beat interval
     word: np.ndarray         # (F,) index of the word (beat interval) containing each frame
     window: np.ndarray       # (F,) AdaIN weight (0 at word boundaries)
-    motif: np.ndarray        # (F,) motif id of the frame's word (-1: none)
+    words: np.ndarray        # (W, 13, FEATURE_DIM) features of each word (its own motif word)
+    motifs: np.ndarray       # (W,) motif id of each word (-1: none)
     music: np.ndarray        # (W, MUSIC_DIMS) per word
     beat_frames: np.ndarray  # (W + 1,) fractional frame positions of the beats
     first: int               # frames [first, last) lie between the first and last beat
     last: int
 
 
-def style_sequences(style: Style, motif_ids: np.ndarray | None = None) -> list[Sequence]:
-    """The clips of ``style`` as training sequences.
+def style_sequences(style: Style, motif_model=None, *, clips=None, rates=(1.0,),
+                    mirror: bool = False) -> list[Sequence]:
+    """The clips of ``style`` (all, or the indices ``clips``) as training sequences, optionally augmented.
 
-    ``motif_ids`` (one per consecutive pair of beats inside a clip, in the order of
-    ``motion.words.style_words``) gives each frame's motif; without it all are -1.
+    Every clip is played at each speed in ``rates`` (1.15: 15 % faster, so shorter
+    beats and faster steps) and, with ``mirror``, also left-right mirrored
+    (``motion.mirror``). Words are cut at the motion beats of each version at
+    ``TRAIN_FPS`` and their motifs assigned by ``motif_model`` (-1 without one): a
+    mirrored word is usually another motif.
     """
-    out, w0 = [], 0
-    step = style.fps / TRAIN_FPS
-    for c in range(style.n_clips):
+    out = []
+    versions = [(r, False) for r in rates] + ([(r, True) for r in rates] if mirror else [])
+    for c in range(style.n_clips) if clips is None else clips:
         clip = style.clip(c)
-        beats60 = np.asarray(clip.meta["beat_frames"], dtype=np.float64)
-        n_words = max(len(beats60) - 1, 0)
-        ids = (np.asarray(motif_ids[w0:w0 + n_words]) if motif_ids is not None
-               else np.full(n_words, -1))
-        w0 += n_words
-        if n_words < 2:
+        beats_src = np.asarray(clip.meta["beat_frames"], dtype=np.float64)
+        if len(beats_src) < 3:
             continue
-        local_rot, root_pos, contacts = resample_clip_arrays(clip.local_rot, clip.root_pos, clip.contacts,
-                                                             style.fps, TRAIN_FPS)
-        n = len(local_rot)
-        beats = beats60 / step
-        k, phase, length_s = beat_phase(n, beats, TRAIN_FPS)
         a, b = style.clip_starts[c], style.clip_starts[c + 1]
-        energy = interval_energy(style.energy[a:b], beats60.astype(np.int64), style.fps)
-        out.append(Sequence(
-            name=clip.meta["name"], poses=encode_pose(local_rot, root_pos, contacts, TRAIN_FPS),
-            beat=beat_features(phase, length_s), word=k, window=hamming_weights(phase),
-            motif=ids[k], music=music_vectors(np.log(energy + 1e-3), np.diff(beats) / TRAIN_FPS),
-            beat_frames=beats, first=int(np.ceil(beats[0])), last=int(np.floor(beats[-1]))))
+        log_energy = np.log(interval_energy(style.energy[a:b], beats_src.astype(np.int64), style.fps) + 1e-3)
+        for rate, mirrored in versions:
+            local_rot, root_pos, contacts = clip.local_rot, clip.root_pos, clip.contacts
+            if mirrored:
+                from ...motion.mirror import mirror_motion
+
+                local_rot, root_pos, contacts = mirror_motion(style.skeleton, local_rot, root_pos, contacts)
+            local_rot, root_pos, contacts = resample_clip_arrays(local_rot, root_pos, contacts,
+                                                                 style.fps * rate, TRAIN_FPS)
+            seq = _sequence(f"{clip.meta['name']}{'-mirrored' if mirrored else ''}@{rate:g}", style.skeleton,
+                            local_rot, root_pos, contacts, beats_src * TRAIN_FPS / (style.fps * rate),
+                            log_energy, motif_model)
+            if seq is not None:
+                out.append(seq)
     return out
+
+
+def _sequence(name, skeleton, local_rot, root_pos, contacts, beats, log_energy, motif_model) -> Sequence | None:
+    n = len(local_rot)
+    beats = beats[beats <= n - 1]
+    frames = np.rint(beats).astype(np.int64)
+    if len(beats) < 3 or np.any(np.diff(frames) < 1):
+        return None
+    k, phase, length_s = beat_phase(n, beats, TRAIN_FPS)
+    words = clip_words(MotionClip(skeleton, TRAIN_FPS, root_pos, local_rot), frames).features
+    motifs = motif_model.assign(words) if motif_model is not None else np.full(len(words), -1)
+    return Sequence(name=name, poses=encode_pose(local_rot, root_pos, contacts, TRAIN_FPS),
+                    phase=phase.astype(np.float32),
+                    length_s=length_s.astype(np.float32), word=k, window=hamming_weights(phase),
+                    words=words.astype(np.float32), motifs=np.asarray(motifs, dtype=np.int64),
+                    music=music_vectors(log_energy[:len(beats) - 1], np.diff(beats) / TRAIN_FPS),
+                    beat_frames=beats, first=int(np.ceil(beats[0])), last=int(np.floor(beats[-1])))
 
 
 def normaliser(sequences: list[Sequence]) -> tuple[np.ndarray, np.ndarray]:

@@ -1,8 +1,9 @@
 """Dancing with the learned pose generator (``dance --engine neural``).
 
 song -> beat grid and per-beat intensity -> one target motif per beat (the
-choreography level) -> the acLSTM runs frame by frame at ``data.TRAIN_FPS``, told
-the phase of the music's beat, the beat's motif and, through AdaIN, the beat's
+choreography level) and a real word of that motif to show the network -> the
+acLSTM runs frame by frame at ``data.TRAIN_FPS``, told the phase of the music's
+beat, the motif words of this beat and the next and, through AdaIN, the beat's
 intensity -> poses decoded, resampled to the output rate, planted feet held with IK.
 
 Beats land on the music because the generator is conditioned on the music's beat
@@ -30,7 +31,7 @@ from ...types import MotionClip, MusicFeatures
 from ..beatgrid import beat_grid, fit_style, fit_summary
 from ..footlock import FootLockState, lock_feet
 from ..stitch import Rendered
-from .data import TRAIN_FPS, beat_features, beat_phase, decode_pose, hamming_weights, music_vectors
+from .data import TRAIN_FPS, beat_phase, conditioning, decode_pose, hamming_weights, music_vectors
 from .store import StoredModel, find_model, load_model, model_id
 
 DEFAULT_GENRE = "salsa"   # the genre of the shipped model
@@ -97,12 +98,11 @@ def generate(model: StoredModel, music: MusicFeatures, grid, motifs: np.ndarray,
     gen = model.generator
     n = int(np.floor(music.duration_s * TRAIN_FPS)) + int(2 * TRAIN_FPS)   # two seconds to spare for the warp
     k, phase, length_s = beat_phase(n, grid.times_s * TRAIN_FPS, TRAIN_FPS)
-    eye = np.eye(max(gen.n_motifs, 1), dtype=np.float32)[:, :gen.n_motifs]
-    motif = eye[np.maximum(motifs[k], 0)] * (motifs[k] >= 0)[:, None]
-    cond = torch.as_tensor(np.concatenate([beat_features(phase, length_s), motif], axis=1))
+    rng = np.random.default_rng(seed)
+    words = model.motif_words_for(motifs, rng)
+    cond = torch.as_tensor(conditioning(phase, length_s, words, k))
     music_w = torch.as_tensor(music_vectors(grid.intensity_db, np.diff(grid.times_s))[k])
     window = torch.as_tensor(hamming_weights(phase))
-    rng = np.random.default_rng(seed)
     start = model.start_poses[rng.integers(len(model.start_poses))]
     prev = torch.as_tensor((start - model.mean) / model.std, dtype=torch.float32)[None]
     out = np.empty((n, len(model.mean)), dtype=np.float32)

@@ -1,5 +1,6 @@
 """Losses of §4.4: geodesic rotation loss and forward-kinematics positions (eq. 6), foot contacts,
-and the motion perceptual loss through the frozen word embedding.
+the motion perceptual loss through the frozen word embedding (eq. 9, against the motif), and a
+penalty on hands inside the head.
 
 All work on un-normalised pose vectors (``data.encode_pose``) in torch, batched as
 (B, T, P). Positions are computed in each frame's heading frame with the root above
@@ -60,7 +61,9 @@ class Body:
         self.n_joints = skeleton.n_joints
         self.parents = [int(p) for p in skeleton.parents]
         self.offsets = torch.as_tensor(np.asarray(skeleton.offsets), dtype=torch.float32)
-        self.ankles = list(find_roles(skeleton).ankles)
+        roles = find_roles(skeleton)
+        self.ankles = list(roles.ankles)
+        self.head, self.wrists = int(roles.head), [int(w) for w in roles.wrists if w >= 0]
         self.fps = fps
 
     def split(self, poses: torch.Tensor):
@@ -117,11 +120,18 @@ def word_features(pos: torch.Tensor, root_mats: torch.Tensor, fps: float, words:
 
 
 class Perceptual(nn.Module):
-    """Motion perceptual loss: distance of generated and real words in the frozen embedding."""
+    """Motion perceptual loss (eq. 9): squared distance of each generated word's embedding to its motif.
 
-    def __init__(self, body: Body, landmarks, embed: nn.Module):
+    The motif is the centroid of the word's ground-truth motif cluster in the frozen
+    embedding of the motif model (``MotifModel.centroids``), as the paper compares the
+    output word with the motif, not with the real word (the rotation and position
+    terms already do that).
+    """
+
+    def __init__(self, body: Body, landmarks, embed: nn.Module, centroids):
         super().__init__()
         self.body, self.landmarks, self.embed = body, [int(i) for i in landmarks], embed
+        self.register_buffer("centroids", torch.as_tensor(np.asarray(centroids), dtype=torch.float32))
         for p in self.embed.parameters():
             p.requires_grad_(False)
 
@@ -130,14 +140,19 @@ class Perceptual(nn.Module):
         g_rot, g_pos = self.body.world_positions(mats, root)
         return word_features(g_pos[..., self.landmarks, :], g_rot[..., 0, :, :], self.body.fps, words)
 
-    def forward(self, pred: torch.Tensor, real: torch.Tensor, words: torch.Tensor) -> torch.Tensor:
-        with torch.no_grad():
-            target = self.embed(self.features(real, words).float())
-        return (self.embed(self.features(pred, words).float()) - target).pow(2).sum(-1).mean()
+    def forward(self, pred: torch.Tensor, words: torch.Tensor) -> torch.Tensor:
+        """``words`` (N, 4): batch index, first and last frame, motif id (words without a motif are skipped)."""
+        words = words[words[:, 3] >= 0]
+        if len(words) == 0:
+            return pred.new_zeros(())
+        z = self.embed(self.features(pred, words[:, :3]).float())
+        return (z - self.centroids[words[:, 3].long()]).pow(2).sum(-1).mean()
 
 
 class PoseLoss(nn.Module):
     """Weighted sum of the §4.4 terms; ``forward`` returns (total, {name: value})."""
+
+    HEAD_RADIUS_M = 0.2   # hands nearer the head joint than this (or than the real hand) are pushed out
 
     def __init__(self, body: Body, mean, std, config, perceptual=None):
         super().__init__()
@@ -161,12 +176,26 @@ class PoseLoss(nn.Module):
         terms["pos"] = (ppos - rpos).norm(dim=-1).mean()
         terms["root"] = F.mse_loss(out[..., -6:-2], target_norm[..., -6:-2])
         terms["contact"] = F.binary_cross_entropy_with_logits(out[..., -2:], rcont) + self._skating(ppos, proot, rcont)
+        terms["head"] = self._hands_in_head(ppos, rpos)
         total = c.w_rot * terms["rot"] + c.w_pos * terms["pos"] + c.w_root * terms["root"] + \
-            c.w_contact * terms["contact"]
+            c.w_contact * terms["contact"] + c.w_head * terms["head"]
         if self.perceptual is not None and words is not None and c.w_percept > 0:
-            terms["percept"] = self.perceptual(pred, real, words)
+            terms["percept"] = self.perceptual(pred, words)
             total = total + c.w_percept * terms["percept"]
         return total, terms
+
+    def _hands_in_head(self, pos: torch.Tensor, real: torch.Tensor) -> torch.Tensor:
+        """Mean depth (m) by which generated hands come nearer the head than allowed.
+
+        Allowed is ``HEAD_RADIUS_M`` or, where the real hand is nearer, the real distance:
+        the penalty never fights the data.
+        """
+        if self.body.head < 0 or not self.body.wrists:
+            return pos.new_zeros(())
+        w, h = self.body.wrists, self.body.head
+        d_pred = (pos[..., w, :] - pos[..., h:h + 1, :]).norm(dim=-1)
+        d_real = (real[..., w, :] - real[..., h:h + 1, :]).norm(dim=-1)
+        return F.relu(d_real.clamp(max=self.HEAD_RADIUS_M) - d_pred).mean()
 
     def _skating(self, pos: torch.Tensor, root: torch.Tensor, contacts: torch.Tensor) -> torch.Tensor:
         """Horizontal foot speed (m/s) of the generated motion where the real foot is planted."""

@@ -24,7 +24,7 @@ from ...motion.database import _skeleton_from_json, _skeleton_to_json, cache_dir
 from ...types import Skeleton
 
 SHIPPED = Path(__file__).resolve().parents[2] / "data" / "models" / "neural"
-FORMAT = 1
+FORMAT = 2   # 2: conditioned on motif words, AdaIN on the output rotations
 
 
 def user_dir() -> Path:
@@ -63,10 +63,27 @@ class StoredModel:
     path: Path
     template: np.ndarray | None = None      # (K,) the genre's motif signature when trained ...
     transitions: np.ndarray | None = None   # (K, K) ... and its motif transitions
+    motif_words: np.ndarray | None = None   # (N, 13, D) real words of the genre, the motif words to dance ...
+    word_motifs: np.ndarray | None = None   # (N,) ... and their motifs
+    medoids: np.ndarray | None = None       # (K, 13, D) the word nearest each motif (for a motif without words)
+
+    def motif_words_for(self, plan, rng: np.random.Generator) -> np.ndarray:
+        """One real word (13, D) of each planned motif, drawn at random (its medoid word where none is stored).
+
+        So a motif is danced a little differently each time. (Choosing the word that best continues the last,
+        as the choreography engine does, was tried: the plan was followed on 47.7 % of beats instead of
+        50.0 %; docs/neural.md.)
+        """
+        out = []
+        for m in np.asarray(plan, dtype=np.int64):
+            members = np.nonzero(self.word_motifs == m)[0]
+            out.append(self.motif_words[members[rng.integers(len(members))]] if len(members) else self.medoids[m])
+        return np.stack(out)
 
 
 def save_model(path: Path, generator, skeleton: Skeleton, mean, std, genre: str, info: dict,
-               start_poses: np.ndarray, template=None, transitions=None) -> None:
+               start_poses: np.ndarray, template=None, transitions=None, *, motif_words=None, word_motifs=None,
+               medoids=None) -> None:
     """Write ``path`` (.pt) and its .json summary atomically."""
     import torch
 
@@ -79,6 +96,9 @@ def save_model(path: Path, generator, skeleton: Skeleton, mean, std, genre: str,
             "start_poses": torch.as_tensor(start_poses, dtype=torch.float16)}
     if template is not None:  # the model's motifs travel with it: a rebuilt motif model cannot confuse it
         blob["template"], blob["transitions"] = torch.as_tensor(template), torch.as_tensor(transitions)
+        blob["medoids"] = torch.as_tensor(medoids, dtype=torch.float16)
+    blob["motif_words"] = torch.as_tensor(motif_words, dtype=torch.float16)   # what the network is conditioned on
+    blob["word_motifs"] = torch.as_tensor(word_motifs, dtype=torch.int16)
     with atomic_output(path, "wb") as fh:
         torch.save(blob, fh)
     with atomic_output(path.with_suffix(".json"), "w") as fh:
@@ -98,14 +118,18 @@ def load_model(path: Path) -> StoredModel:
         blob = torch.load(path, map_location="cpu", weights_only=True)
         if not isinstance(blob, dict) or blob.get("format") != FORMAT:
             raise ValueError("not a dancesynth neural model of this version")
-        config = NeuralConfig(**blob["config"])
+        config = NeuralConfig.from_dict(blob["config"])
         gen = PoseGenerator(int(blob["pose_dims"]), int(blob["n_motifs"]), config)
         gen.load_state_dict(blob["state_dict"])
         skeleton = _skeleton_from_json(json.loads(blob["skeleton"]))
         info = json.loads(blob["info"])
         start = blob["start_poses"].float().numpy()
         motifs = [blob[k].numpy() if k in blob else None for k in ("template", "transitions")]
-        if (motifs[0] is None) != (gen.n_motifs == 0) or (motifs[0] is not None and motifs[0].shape != (gen.n_motifs,)):
+        words = [blob[k].float().numpy() if k in blob else None for k in ("motif_words", "word_motifs", "medoids")]
+        if words[1] is not None:
+            words[1] = words[1].astype(np.int64)
+        if words[0] is None or (motifs[0] is None) != (gen.n_motifs == 0) or \
+                (motifs[0] is not None and motifs[0].shape != (gen.n_motifs,)):
             raise ValueError("its motif template does not fit the network")
     except (OSError, RuntimeError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile,
             json.JSONDecodeError, __import__("pickle").UnpicklingError) as exc:
@@ -113,4 +137,4 @@ def load_model(path: Path) -> StoredModel:
                          "retrain it with 'dancesynth train' or reinstall dancesynth") from None
     gen.eval()
     return StoredModel(gen, skeleton, blob["mean"].numpy(), blob["std"].numpy(), str(blob["genre"]), info,
-                       start, path, *motifs)
+                       start, path, *motifs, *words)
