@@ -306,8 +306,8 @@ MIN_TRAIN_MINUTES, MAX_TRAIN_MINUTES = 0.1, 7 * 24 * 60.0
 @cli.command()
 @click.option("--style", default="salsa", show_default=True, help="Style or genre to learn (see 'dancesynth styles').")
 @click.option("--config", "config_name", type=click.Choice(["tiny", "small", "paper"]), default="small",
-              show_default=True, help="Model size: small (the shipped model) trains on a 2-core laptop CPU in under "
-              "30 minutes, paper is Aristidou et al.'s (a GPU).")
+              show_default=True, help="Model size: small (the shipped model) trains on a 2-core laptop CPU in about "
+              "7 minutes, paper is Aristidou et al.'s (a GPU).")
 @click.option("--device", type=click.Choice(["cpu", "cuda"]), default="cpu", show_default=True)
 @click.option("--steps", type=click.IntRange(min=1, max=10_000_000), default=None,
               help="Training steps (default: the config's). Same data, steps and seed give the same weights.")
