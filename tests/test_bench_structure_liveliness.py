@@ -127,3 +127,25 @@ def test_neural_realism_scores_against_the_clips_the_model_never_saw(bundled_db,
     assert r["fid_k_ratio"] == pytest.approx(r["scores"]["neural"]["fid_k"] / r["scores"]["streaming"]["fid_k"])
     assert bs.neural_realism(small_config(), bundled_db, {}, songs, None) == {
         "skipped": "the neural model names no held-out clips"}
+
+
+def test_found_motifs_stay_aligned_with_the_plan_when_the_grid_starts_before_the_song(bundled_db):
+    """A beat grid extended before 0 s (a slow song's subdivided grid) must not shift the found motifs.
+
+    Cutting at the distinct frames merged the intervals before the song into one, and every
+    later motif was compared with the plan of the next beat: 6-13 % of beats followed the plan
+    at 60 bpm, 46-65 % once aligned.
+    """
+    from dancesynth.motion.motifs import load_motif_model
+
+    model = load_motif_model(bundled_db)
+    clip = bundled_db.styles["salsa-97-116bpm"].clip(0)
+    beats = clip.meta["beat_frames"][:12] / clip.fps
+    found = bs.found_motifs(clip, model, beats)
+    extended = bs.found_motifs(clip, model, np.r_[-1.0, -0.5, beats])
+    assert len(found) == len(beats) - 1 and len(extended) == len(beats) + 1   # one id per interval
+    assert extended[0] == -1                                  # wholly before the song: nothing to cut
+    assert (extended[2:] == found).all() and (found >= 0).all()
+    plan = np.r_[7, extended[1:]]                             # a motif planned where the song has no motion
+    danced = SimpleNamespace(provenance=SimpleNamespace(motifs={"motif_plan": plan}))
+    assert bs.plan_followed(danced, extended) == 1.0          # ... is not counted against the dance

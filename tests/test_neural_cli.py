@@ -65,6 +65,7 @@ def test_the_dance_follows_its_motif_plan_far_above_chance(music):
         clip = dance(music, engine="neural", style="salsa", seed=seed)
         found = found_motifs(clip, model, clip.provenance.grid_times_s)
         plan = clip.provenance.motifs["motif_plan"][:len(found)]
+        found, plan = found[found >= 0], plan[found >= 0]      # beats inside the song
         followed.append(np.mean(found == plan))
         chance.append(np.sum(np.bincount(plan, minlength=model.k) * np.bincount(found, minlength=model.k))
                       / len(found) ** 2)

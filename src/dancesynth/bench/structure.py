@@ -56,11 +56,24 @@ NOTES = ("chi2: eq. (11) between the signature of the motifs found again in the 
 
 
 def found_motifs(clip, model, beat_times_s) -> np.ndarray:
-    """The motif of every beat interval, found again in the motion: words cut at the beats, re-embedded."""
-    from ..motion.motifs import beat_frames_at
-    from ..motion.words import clip_words
+    """The motif of every beat interval, found again in the motion: words cut at the beats, re-embedded.
 
-    return model.assign(clip_words(clip, beat_frames_at(clip, beat_times_s)).features)
+    One id per interval of ``beat_times_s``, so index i is the engine's plan for beat i; -1
+    where the interval is not inside the motion (a beat grid extended before the song's start
+    or past its end). Cutting at the distinct frames instead merged two such intervals into
+    one and shifted every later id by one against the plan.
+    """
+    from ..motion.words import clip_landmarks, word_features
+
+    frames = np.rint(np.asarray(beat_times_s, dtype=np.float64) * clip.fps).astype(np.int64)
+    frames = np.clip(frames, 0, clip.n_frames - 1)
+    inside = frames[1:] > frames[:-1]
+    ids = np.full(len(inside), -1, dtype=np.int64)
+    if inside.any():
+        pos, root_rot = clip_landmarks(clip)
+        feats = word_features(pos, root_rot, clip.fps, frames[:-1][inside], frames[1:][inside])
+        ids[inside] = model.assign(feats.astype(np.float32))
+    return ids
 
 
 def _chi2_ids(model, template, ids) -> float | None:
@@ -96,7 +109,7 @@ def plan_followed(clip, found) -> float | None:
     if plan is None:
         return None
     n = min(len(plan), len(found))
-    planned = np.asarray(plan[:n]) >= 0  # -1: a beat without a motif (no plan there)
+    planned = (np.asarray(plan[:n]) >= 0) & (np.asarray(found[:n]) >= 0)  # -1: no plan there / not in the motion
     return float(np.mean(np.asarray(found[:n])[planned] == np.asarray(plan[:n])[planned])) if planned.any() else None
 
 
@@ -154,7 +167,8 @@ def mocap_chi2(db, model) -> list[dict]:
     ids = []
     for st, c in clips:
         clip = st.clip(c)
-        ids.append(found_motifs(clip, model, clip.meta["beat_frames"] / clip.fps))
+        found = found_motifs(clip, model, clip.meta["beat_frames"] / clip.fps)
+        ids.append(found[found >= 0])
     sigs = np.array([np.bincount(i, minlength=model.k) / len(i) for i in ids])
     template = model.templates[GENRE]
     rows = []
@@ -200,7 +214,7 @@ def structure(cfg: BenchConfig, db, progress: Progress | None = None, out_dir: P
                             joint_speed_p99_vs_mocap=_ratio(live["joint_speed_p99"], live_ref["joint_speed_p99"]),
                             plan_followed=plan_followed(clip, found))
                 per_dance.append({"song": Path(song).name, "seed": seed, "engine": name, "style": clip.provenance.style,
-                                  "duration_s": music.duration_s, "words": int(len(found)),
+                                  "duration_s": music.duration_s, "words": int(np.sum(found >= 0)),
                                   "chi2": _chi2_ids(model, template, found),
                                   "chi2_danced": None if danced is None else _chi2_ids(model, template, danced),
                                   "wall_s": clip.meta["bench_wall_s"], "liveliness": live,
@@ -408,7 +422,7 @@ def recreation(cfg: BenchConfig, db, model, progress) -> dict:
             found = found_motifs(clip, model, run.grid_times_s)
             rows.append({"reference": st.clip_names[c], "beats": int(len(wanted)),
                          "danced": float(np.mean(run.motifs["motif_ids"] == wanted)),
-                         "found_again": float(np.mean(found == wanted[:len(found)]))})
+                         "found_again": float(np.mean((found == wanted[:len(found)])[found >= 0]))})
     return {"style": st.name, "song": cfg.recreate_song, "rows": rows,
             "danced_mean": _mean(r["danced"] for r in rows), "found_again_mean": _mean(r["found_again"] for r in rows),
             "found_again_min": _reduce((r["found_again"] for r in rows), np.min)}
