@@ -28,7 +28,7 @@ previous beat, and the beat length.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -193,7 +193,7 @@ def conditioning(phase, length_s, exemplars, k) -> np.ndarray:
 class Sequence:
     """One dance at ``TRAIN_FPS`` with everything the generator is trained on."""
 
-    name: str
+    name: str                # the clip's
     poses: np.ndarray        # (F, P) pose vectors
     phase: np.ndarray        # (F,) beat phase
     length_s: np.ndarray     # (F,) length of the frame's beat interval
@@ -205,6 +205,8 @@ class Sequence:
     beat_frames: np.ndarray  # (W + 1,) fractional frame positions of the beats
     first: int               # frames [first, last) lie between the first and last beat
     last: int
+    rate: float = 1.0        # the clip played this much faster (augmentation) ...
+    mirrored: bool = False   # ... and left-right mirrored
 
 
 def style_sequences(style: Style, motif_model=None, *, clips=None, rates=(1.0,),
@@ -234,11 +236,10 @@ def style_sequences(style: Style, motif_model=None, *, clips=None, rates=(1.0,),
                 local_rot, root_pos, contacts = mirror_motion(style.skeleton, local_rot, root_pos, contacts)
             local_rot, root_pos, contacts = resample_clip_arrays(local_rot, root_pos, contacts,
                                                                  style.fps * rate, TRAIN_FPS)
-            seq = _sequence(f"{clip.meta['name']}{'-mirrored' if mirrored else ''}@{rate:g}", style.skeleton,
-                            local_rot, root_pos, contacts, beats_src * TRAIN_FPS / (style.fps * rate),
-                            log_energy, motif_model)
+            seq = _sequence(clip.meta["name"], style.skeleton, local_rot, root_pos, contacts,
+                            beats_src * TRAIN_FPS / (style.fps * rate), log_energy, motif_model)
             if seq is not None:
-                out.append(seq)
+                out.append(replace(seq, rate=rate, mirrored=mirrored))
     return out
 
 

@@ -159,7 +159,7 @@ def _perceptual(body: Body, skeleton, ts: TrainingSet):
 def motif_words_store(ts: TrainingSet, per_motif: int = 24, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Up to ``per_motif`` training words of each motif, as danced (no tempo change), for inference."""
     rng = np.random.default_rng(seed)
-    plain = [s for s in ts.train if s.name.endswith("@1")]
+    plain = [s for s in ts.train if s.rate == 1.0]
     feats = np.concatenate([s.words for s in plain])
     ids = np.concatenate([s.motifs for s in plain])
     keep = np.concatenate([rng.permutation(np.nonzero(ids == m)[0])[:per_motif] for m in np.unique(ids)])
@@ -257,15 +257,15 @@ def train(genre: str = "salsa", config: str | NeuralConfig = "small", *, device:
         curve.append(_log_point(step, time.perf_counter() - t0, recent, gen, run, held_batch))
     info = {"config": cfg.to_dict(), "steps": step, "train_s": round(time.perf_counter() - t0, 1),
             "total_s": round(time.perf_counter() - t_start, 1), "device": device, "seed": seed,
-            "threads": cfg.threads, "clips": len({s.name.split("@")[0].removesuffix("-mirrored") for s in ts.train}),
-            "sequences": len(ts.train), "held_out_clips": [s.name.split("@")[0] for s in ts.held_out],
+            "threads": cfg.threads, "clips": len({s.name for s in ts.train}),
+            "sequences": len(ts.train), "held_out_clips": [s.name for s in ts.held_out],
             "frames": int(sum(len(s.poses) for s in ts.train)), "fps": TRAIN_FPS,
             "motifs": ts.n_motifs, "motif_source": ts.motif_source, "perceptual_embedding": embedding,
             "first_loss": first_loss, "final_loss": curve[-1]["loss"] if curve else None, "curve": curve}
     gen.cpu().eval()
     words, word_motifs = motif_words_store(ts, seed=seed)
     save_model(path, gen, ts.skeleton, ts.mean, ts.std, ts.genre, info,
-               start_poses([s for s in ts.train if s.name.endswith("@1")]), ts.template, ts.transitions,
+               start_poses([s for s in ts.train if s.rate == 1.0]), ts.template, ts.transitions,
                motif_words=words, word_motifs=word_motifs, medoids=ts.medoids)
     info["path"] = str(path)
     info["plot"] = str(plot_curve(info, path.with_suffix(".png")))
