@@ -77,6 +77,33 @@ def test_geodesic_loss_is_the_rotation_angle():
     assert ang == pytest.approx([0.5, 0.0], abs=2e-3)
 
 
+def test_kinetic_term_wants_the_real_energy_where_frame_wise_losses_prefer_a_damped_copy(style, clip30):
+    """Why the term exists: frame by frame, a blurred copy of a dance is nearer the real one
+    than the same dance four frames late, so a generator unsure of the timing learns to blur.
+    The kinetic term (each joint's kinetic energy and acceleration over the sequence)
+    ranks them the other way round."""
+    from dataclasses import replace
+
+    local, root, contacts = clip30
+    poses = encode_pose(local, root, contacts, TRAIN_FPS).astype(np.float32)
+    a, n = 200, 60
+    kernel = np.full(9, 1 / 9, dtype=np.float32)
+    blurred = np.stack([np.convolve(poses[:, d], kernel, mode="same") for d in range(poses.shape[1])], axis=1)
+    mean, std = poses.mean(0), (poses.std(0) + 1e-3).astype(np.float32)
+    loss = PoseLoss(Body(style.skeleton, TRAIN_FPS), mean, std, replace(NeuralConfig.named("small"), w_kinetic=1.0))
+    real = torch.as_tensor((poses[a:a + n] - mean) / std)[None]
+
+    def terms(x):
+        out = torch.as_tensor((x - mean) / std)[None]
+        out[..., -2:] = 0.0   # contact logits: not what is compared here
+        return {k: v.item() for k, v in loss(out, real)[1].items()}
+
+    same, late, blur = terms(poses[a:a + n]), terms(poses[a - 4:a + n - 4]), terms(blurred[a:a + n])
+    assert same["kinetic"] < 1e-9
+    assert blur["pos"] < late["pos"] / 2                 # frame-wise: the blurred copy looks better ...
+    assert blur["kinetic"] > 10 * late["kinetic"]        # ... the kinetic term sees it has lost the energy
+
+
 def test_adain_leaves_word_boundaries_unchanged():
     torch.manual_seed(0)
     layer = WindowedAdaIN(16, 8)
@@ -192,3 +219,23 @@ def test_training_is_reproducible_on_the_tiny_config(tmp_path):
     assert not all(torch.equal(blobs[0][k], blobs[2][k]) for k in blobs[0])
     assert [p["loss"] for p in runs[0]["curve"]] == [p["loss"] for p in runs[1]["curve"]]
     assert Path(runs[0]["plot"]).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"     # the loss curve, as a picture
+
+
+def test_stored_motif_words_are_the_least_ambiguous_of_their_motif():
+    """The words shown at inference lie deep inside their motif, so what the network redraws
+    from them is found again as that motif rather than its neighbour."""
+    from dancesynth.engines.neural.train import motif_words_store
+
+    ts = training_set("salsa")
+    words, ids = motif_words_store(ts, per_motif=24, keep=6)
+    drawn, drawn_ids = motif_words_store(ts, per_motif=24, keep=24)     # the same random draw, unfiltered
+    assert np.bincount(ids).max() <= 6 and set(ids) == set(drawn_ids)   # every motif keeps words
+
+    def margin(w):
+        z = ts.embedder.embed(w.astype(np.float32))
+        d = np.sort(((z[:, None, :] - ts.centroids[None]) ** 2).sum(-1), axis=1)
+        return d[:, 1] - d[:, 0]
+
+    assert (margin(words) > 0).all()                                    # each nearest its own motif's centroid
+    for m in np.unique(ids):   # the kept are the deepest of the drawn
+        assert margin(words[ids == m]).min() >= np.sort(margin(drawn[drawn_ids == m]))[::-1][:6].min() - 1e-9

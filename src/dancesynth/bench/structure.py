@@ -280,6 +280,23 @@ def neural_targets(s: dict) -> dict:
     return out
 
 
+def held_out_database(db, held) -> tuple:
+    """``(db without the clips named in held, those clips at MOCAP_FPS)``, for the genre's styles.
+
+    The shipped motif model is kept (``db.source``): the streaming engine only counts motifs with it.
+    """
+    from ..motion.database import MotionDatabase
+
+    styles, reference = {}, []
+    for st in db.styles_of(GENRE):
+        out = [c for c in range(st.n_clips) if st.clip_names[c] in held]
+        reference += [at_fps(st.clip(c), MOCAP_FPS) for c in out]
+        for c in reversed(out):  # the last first: without_clip renumbers the clips after it
+            st = st.without_clip(c)
+        styles[st.name] = st
+    return MotionDatabase(styles, db.source), reference
+
+
 def neural_realism(cfg: BenchConfig, db, info: dict | None, songs: list, progress) -> dict:
     """FID_k / FID_g of the neural and the streaming dances against the salsa clips the neural model never saw.
 
@@ -288,25 +305,16 @@ def neural_realism(cfg: BenchConfig, db, info: dict | None, songs: list, progres
     """
     from ..errors import InputError
     from ..eval.realism import realism_scores
-    from ..motion.database import MotionDatabase
     from .realism import NOTE
 
     held = set((info or {}).get("held_out_clips") or ())
     if not held:
         return {"skipped": "the neural model names no held-out clips"}
-    styles, reference = {}, []
-    for st in db.styles_of(GENRE):
-        out = [c for c in range(st.n_clips) if st.clip_names[c] in held]
-        reference += [at_fps(st.clip(c), MOCAP_FPS) for c in out]
-        for c in reversed(out):  # the last first: without_clip renumbers the clips after it
-            st = st.without_clip(c)
-        styles[st.name] = st
+    only, reference = held_out_database(db, held)
     if not reference:
         return {"skipped": f"held-out clips {sorted(held)} are not in this database"}
     if not songs:
         return {"skipped": "no song was danced"}
-    # The shipped motif model is kept (db.source): the streaming engine only counts motifs here.
-    only = MotionDatabase(styles, db.source)
     generated = {"neural": [], "streaming": []}
     for name, music in songs:
         for seed in range(cfg.structure_seeds):

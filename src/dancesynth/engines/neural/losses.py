@@ -153,6 +153,7 @@ class PoseLoss(nn.Module):
     """Weighted sum of the §4.4 terms; ``forward`` returns (total, {name: value})."""
 
     HEAD_RADIUS_M = 0.2   # hands nearer the head joint than this (or than the real hand) are pushed out
+    KINETIC_FLOOR = (0.01, 0.01, 0.1)   # m²/s², m²/s², m/s²: a still joint's statistics do not blow up the log
 
     def __init__(self, body: Body, mean, std, config, perceptual=None):
         super().__init__()
@@ -179,6 +180,9 @@ class PoseLoss(nn.Module):
         terms["head"] = self._hands_in_head(ppos, rpos)
         total = c.w_rot * terms["rot"] + c.w_pos * terms["pos"] + c.w_root * terms["root"] + \
             c.w_contact * terms["contact"] + c.w_head * terms["head"]
+        if c.w_kinetic > 0:
+            terms["kinetic"] = self._kinetic(body.world_positions(pm, proot)[1], body.world_positions(rm, rroot)[1])
+            total = total + c.w_kinetic * terms["kinetic"]
         if self.perceptual is not None and words is not None and c.w_percept > 0:
             terms["percept"] = self.perceptual(pred, words)
             total = total + c.w_percept * terms["percept"]
@@ -196,6 +200,23 @@ class PoseLoss(nn.Module):
         d_pred = (pos[..., w, :] - pos[..., h:h + 1, :]).norm(dim=-1)
         d_real = (real[..., w, :] - real[..., h:h + 1, :]).norm(dim=-1)
         return F.relu(d_real.clamp(max=self.HEAD_RADIUS_M) - d_pred).mean()
+
+    def _kinetic(self, pos: torch.Tensor, real: torch.Tensor) -> torch.Tensor:
+        """Squared log-ratio of each joint's kinetic statistics over a sequence, generated to real.
+
+        Per sequence and joint: mean horizontal and vertical squared speed and mean
+        acceleration magnitude (the kinetic features of FID_k). Frame-wise losses let
+        a generator unsure of the timing regress to the mean, a damped motion; these
+        statistics ask for the real motion's energy without fixing when it happens.
+        """
+        def stats(p):
+            v = torch.diff(p, dim=1) * self.body.fps
+            a = torch.diff(p, n=2, dim=1) * self.body.fps ** 2
+            return torch.stack([(v[..., 0] ** 2 + v[..., 2] ** 2).mean(1), (v[..., 1] ** 2).mean(1),
+                                a.norm(dim=-1).mean(1)], dim=-1)          # (B, J, 3)
+
+        floor = pos.new_tensor(self.KINETIC_FLOOR)
+        return (torch.log(stats(pos) + floor) - torch.log(stats(real) + floor)).pow(2).mean()
 
     def _skating(self, pos: torch.Tensor, root: torch.Tensor, contacts: torch.Tensor) -> torch.Tensor:
         """Horizontal foot speed (m/s) of the generated motion where the real foot is planted."""

@@ -54,6 +54,7 @@ class NeuralConfig:
     w_contact: float = 0.2      # contact classification + foot skating
     w_percept: float = 0.5      # eq. (9): motion perceptual loss against the motif
     w_head: float = 10.0        # hands kept out of the head (metres of penetration)
+    w_kinetic: float = 1.0      # each joint's kinetic energy and acceleration over a sequence, as the real's
 
     @staticmethod
     def named(name: str) -> "NeuralConfig":

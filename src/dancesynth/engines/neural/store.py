@@ -70,9 +70,10 @@ class StoredModel:
     def motif_words_for(self, plan, rng: np.random.Generator) -> np.ndarray:
         """One real word (13, D) of each planned motif, drawn at random (its medoid word where none is stored).
 
-        So a motif is danced a little differently each time. (Choosing the word that best continues the last,
-        as the choreography engine does, was tried: the plan was followed on 47.7 % of beats instead of
-        50.0 %; docs/neural.md.)
+        So a motif is danced a little differently each time. The stored words are the least ambiguous of
+        their motif (``train.motif_words_store``). (Choosing the word that best continues the last, as the
+        choreography engine does, was tried: the plan was followed on 47.7 % of beats instead of 50.0 %;
+        docs/neural.md.)
         """
         out = []
         for m in np.asarray(plan, dtype=np.int64):

@@ -156,15 +156,28 @@ def _perceptual(body: Body, skeleton, ts: TrainingSet):
     return Perceptual(body, landmark_indices(skeleton), ts.embedder.torch_module(), ts.centroids), ts.embedder.kind
 
 
-def motif_words_store(ts: TrainingSet, per_motif: int = 24, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Up to ``per_motif`` training words of each motif, as danced (no tempo change), for inference."""
+def motif_words_store(ts: TrainingSet, per_motif: int = 24, keep: int = 12,
+                      seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Up to ``keep`` training words of each motif, as danced (no tempo change), for inference.
+
+    ``per_motif`` words of a motif are drawn at random; of those, the ``keep`` deepest inside
+    the motif are stored: the largest margin, in the motif model's embedding, between the
+    nearest other centroid and their own. The network redraws a word a little differently, and
+    a word near a border comes out as the neighbouring motif: with these, the planned motif was
+    found again on 60 % of beats instead of 48 %, at the same realism (docs/neural.md).
+    """
     rng = np.random.default_rng(seed)
     plain = [s for s in ts.train if s.rate == 1.0]
     feats = np.concatenate([s.words for s in plain])
     ids = np.concatenate([s.motifs for s in plain])
-    keep = np.concatenate([rng.permutation(np.nonzero(ids == m)[0])[:per_motif] for m in np.unique(ids)])
-    keep.sort()
-    return feats[keep], ids[keep]
+    drawn = [rng.permutation(np.nonzero(ids == m)[0])[:per_motif] for m in np.unique(ids)]
+    if ts.embedder is not None and ts.centroids is not None:
+        z = ts.embedder.embed(feats.astype(np.float32))
+        d = np.sort(((z[:, None, :] - ts.centroids[None]) ** 2).sum(-1), axis=1)
+        margin = d[:, 1] - d[:, 0]
+        drawn = [w[np.argsort(-margin[w], kind="stable")[:keep]] for w in drawn]
+    chosen = np.sort(np.concatenate(drawn))
+    return feats[chosen], ids[chosen]
 
 
 def start_poses(seqs: list[Sequence], per_sequence: int = 8) -> np.ndarray:
