@@ -3,11 +3,12 @@
     .venv/bin/python benchmarks/neural_quick.py [--model PATH] [--seeds 5] [--json OUT]
 
 Dances the 4 bundled songs longer than 20 s with ``--seeds`` seeds each, on the salsa
-database without the take the model held out, and prints, beside the streaming engine on
-the same songs and seeds: FID_k, FID_g and Div_k against that held-out take; the share of
-beats whose motif found again is the planned one; chi2 to the salsa template; hand in head,
-root travel, p99 joint speed, one-frame steps; the mean kinetic energy and acceleration over
-joints; and the geometric relations that separate the generated motion from the mocap most.
+database without the take the model held out, and prints for the neural engine with and
+without its spread post-filter, beside the streaming engine on the same songs and seeds:
+FID_k, FID_g and Div_k against that held-out take; the share of beats whose motif found
+again is the planned one; chi2 to the salsa template; hand in head, root travel, p99 joint
+speed, one-frame steps; the mean kinetic energy and acceleration over joints; and the
+geometric relations that separate the generated motion from the mocap most.
 Section 6 of ``dancesynth bench`` (``benchmarks/neural_bench.py``) is the full measurement.
 """
 
@@ -46,11 +47,13 @@ def main(argv=None) -> int:
         print(f"the model names no held-out clip of this database ({sorted(held)})", file=sys.stderr)
         return 1
     songs = [m for m in (analyse(p) for p in sorted(MUSIC_DIR.glob("*.ogg"))) if m.duration_s >= 20.0]
-    dances = {"streaming": [], "neural": []}
+    dances = {"streaming": [], "neural": [], "network alone": []}
     for music in songs:
         for seed in range(args.seeds):
             dances["streaming"].append(dance(music, database=only, style=GENRE, seed=seed))
             dances["neural"].append(dance(music, database=only, style=GENRE, seed=seed, model=str(model_path)))
+            dances["network alone"].append(dance(music, database=only, style=GENRE, seed=seed, model=str(model_path),
+                                                 restore_spread=False))
     scores = realism_scores(dances, reference)
     motifs = load_motif_model(db)
     kin, geo = {}, {}

@@ -9,7 +9,7 @@ torch = pytest.importorskip("torch")
 
 from dancesynth import rotations as rot  # noqa: E402
 from dancesynth.engines.neural.data import (TRAIN_FPS, beat_phase, decode_pose, encode_pose,  # noqa: E402
-                                            hamming_weights, pose_dims)
+                                            hamming_weights, pose_dims, restore_spread)
 from dancesynth.engines.neural.engine import motif_plan  # noqa: E402
 from dancesynth.engines.neural.losses import Body, PoseLoss, fk as torch_fk, geodesic  # noqa: E402
 from dancesynth.engines.neural.model import NeuralConfig, PoseGenerator, WindowedAdaIN  # noqa: E402
@@ -102,6 +102,24 @@ def test_kinetic_term_wants_the_real_energy_where_frame_wise_losses_prefer_a_dam
     assert same["kinetic"] < 1e-9
     assert blur["pos"] < late["pos"] / 2                 # frame-wise: the blurred copy looks better ...
     assert blur["kinetic"] > 10 * late["kinetic"]        # ... the kinetic term sees it has lost the energy
+
+
+def test_spread_filter_gives_a_damped_dance_its_amplitude_back_and_nothing_else(clip30):
+    """What a network regressing to the mean makes: the real dance, damped about its own average pose.
+    The post-filter widens it again, by at most its cap, keeping the posture and the timing."""
+    poses = encode_pose(*clip30, TRAIN_FPS)
+    std = poses.std(axis=0)
+    z = (poses - poses.mean(axis=0)) / np.where(std < 1e-4, 1.0, std) + 0.3     # off-centre: a posture to keep
+    spread = z.std(axis=0)
+    damped = z.mean(axis=0) + 0.7 * (z - z.mean(axis=0))
+    channels = z.shape[1] - 2                                                    # not the foot contacts
+    live = spread[:channels] > 0.05
+    capped = restore_spread(damped, spread, channels, cap=1.2)
+    assert np.allclose(capped[:, :channels].std(axis=0)[live], 0.84 * spread[:channels][live], rtol=1e-3)
+    assert np.allclose(capped.mean(axis=0), damped.mean(axis=0), atol=1e-5)      # the same average pose
+    assert np.array_equal(capped[:, channels:], damped[:, channels:])
+    assert np.allclose(restore_spread(damped, spread, channels, cap=2.0)[:, :channels], z[:, :channels], atol=1e-4)
+    assert np.allclose(restore_spread(z * 1.5, spread, channels, cap=2.0), z * 1.5, atol=1e-5)   # never narrows
 
 
 def test_adain_leaves_word_boundaries_unchanged():

@@ -107,6 +107,24 @@ def test_missing_and_corrupt_weights(tmp_path):
         load_model(cut)
 
 
+def test_the_spread_post_filter_livens_the_network_and_paper_dances_the_network_alone(tmp_path, capsys, music):
+    """The post-filter widens the network's damped motion (more travel, faster joints) within the
+    liveliness bounds, on the same plan and beats; ``--paper`` leaves it out and says so."""
+    from dancesynth.bench.structure import liveliness
+    from dancesynth.engines.neural.engine import SPREAD_CAP
+
+    full = dance(music, engine="neural", seed=2)
+    alone = dance(music, engine="neural", seed=2, restore_spread=False)
+    assert full.provenance.summary["spread_cap"] == SPREAD_CAP > 1.0 and alone.provenance.summary["spread_cap"] == 1.0
+    assert np.array_equal(full.provenance.motifs["motif_plan"], alone.provenance.motifs["motif_plan"])
+    lf, la = liveliness(full), liveliness(alone)
+    assert lf["root_travel_m_per_min"] > 1.05 * la["root_travel_m_per_min"]
+    assert lf["joint_speed_p99"] > 1.05 * la["joint_speed_p99"]
+    assert lf["joint_speed_p99"] < 1.3 * 2.50 and lf["hand_in_head"] <= 0.02 and lf["one_frame_steps"] == 0
+    assert main(["dance", SONG, "--engine", "neural", "--paper", "-o", str(tmp_path / "p.bvh")]) == 0
+    assert "the network alone" in capsys.readouterr().out
+
+
 def test_a_corrupt_model_of_the_user_fails_the_dance_cleanly(tmp_path, capsys):
     bad = tmp_path / "salsa.pt"
     bad.write_bytes(b"\0" * 64)

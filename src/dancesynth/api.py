@@ -42,6 +42,8 @@ class DanceConfig:
     follow_signature: bool = False      # streaming: also keep the genre's motif signature (engines/graph/signature.py)
     model: str | None = None            # neural: the weights to dance with (a .pt of 'dancesynth train'); None:
                                         # the shipped model of the style's genre
+    restore_spread: bool = True         # neural: widen the network's damped motion toward the mocap's spread
+                                        # (engines/neural/data.restore_spread); False: the network alone
 
     def __post_init__(self):
         # Choreography constraints: one "12.0=M17" string or a sequence of them / of (seconds, motif) pairs.

@@ -102,7 +102,9 @@ def dance(song, output, character, bone_map, database, report_path, quiet, **opt
                    + (f", {s['constraints']} constraint(s)" if s.get("constraints") else "")
                    + (f", re-creating {s['recreate']}" if s.get("recreate") else ""))
     if s.get("model_sha256"):
-        click.echo(f"model     {s['model_name']}, sha256 {s['model_sha256']}: {s['model']}")
+        spread = (f"spread post-filter up to {s['spread_cap']:g}x" if s.get("spread_cap", 1.0) > 1.0
+                  else "the network alone")
+        click.echo(f"model     {s['model_name']}, sha256 {s['model_sha256']}, {spread}: {s['model']}")
     # The choreography and neural engines spend the graph's stage on motifs and on loading the model.
     stage = {"choreography": "motifs", "neural": "model"}.get(s["engine"], "graph")
     cached = " (cached)" if stage == "graph" and s["graph_cached"] else ""

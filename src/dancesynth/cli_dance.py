@@ -42,7 +42,8 @@ _OPTIONS = [
     click.option("--paper", is_flag=True,
                  help="Xu et al.'s graph and objective as printed: no repeat penalty, jump cost, jump limits or "
                       "accent costs, literal eq. (1). Still on: style and level choice, glitch skipping, blends "
-                      "and foot lock (README: 'Where we depart from or add to the paper')."),
+                      "and foot lock (README: 'Where we depart from or add to the paper'). With --engine neural: "
+                      "the network's motion without the spread post-filter (docs/neural.md)."),
 ]
 
 def dance_options(command):
@@ -64,7 +65,7 @@ def dance_config(*, style, engine, recreate, motif_at, follow_signature, segment
     from .engines.graph.meta_graph import GraphConfig
 
     if paper:
-        config = replace(config, graph=GraphConfig.paper(), render=EngineConfig.paper())
+        config = replace(config, graph=GraphConfig.paper(), render=EngineConfig.paper(), restore_spread=False)
     if ths is not None or thr is not None:
         try:
             graph = replace(config.graph, **{k: v for k, v in (("ths", ths), ("thr", thr)) if v is not None})

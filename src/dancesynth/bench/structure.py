@@ -41,7 +41,7 @@ GENRE = "salsa"
 ENGINES = ("mocap", "streaming", "signature", "global", "random_walk", "choreography", "neural")
 TITLES = {"mocap": "raw mocap*", "streaming": "streaming (Xu)", "signature": "streaming + signature",
           "global": "global DP", "random_walk": "random walk", "choreography": "choreography mixer",
-          "neural": "neural (acLSTM)"}
+          "neural": "neural (acLSTM)", "network": "neural, network alone"}
 METRIC_KEYS = ("hit_rate", "bas_music", "aligned_beat_ratio", "accent_precision_x_chance", "accent_recall_x_chance",
                "intensity_spearman", "transition_jump_vs_mocap_p99", "jump_p99_vs_mocap", "jerk_vs_mocap",
                "foot_skate_m_s", "pfc")
@@ -123,6 +123,7 @@ def engine_dances(music, db, seed: int, engines, style: str | None = GENRE) -> d
              "lookahead": dict(follow_signature=True, render=EngineConfig(signature_weight=0.0), lookahead_s=5.0),
              "signature": dict(follow_signature=True), "global": dict(engine="global"),
              "choreography": dict(engine="choreography"), "neural": dict(engine="neural"),
+             "network": dict(engine="neural", restore_spread=False),   # without the spread post-filter
              "paper": dict(graph=GraphConfig.paper(), render=EngineConfig.paper())}  # Xu et al. as printed
     out = {}
     for name in engines:
@@ -315,7 +316,7 @@ def neural_realism(cfg: BenchConfig, db, info: dict | None, songs: list, progres
         return {"skipped": f"held-out clips {sorted(held)} are not in this database"}
     if not songs:
         return {"skipped": "no song was danced"}
-    generated = {"neural": [], "streaming": []}
+    generated = {"neural": [], "network": [], "streaming": []}
     for name, music in songs:
         for seed in range(cfg.structure_seeds):
             if progress:
@@ -330,7 +331,9 @@ def neural_realism(cfg: BenchConfig, db, info: dict | None, songs: list, progres
     return {"held_out": [c.meta["name"] for c in reference], "reference_s": float(sum(c.duration_s for c in reference)),
             "dances": len(generated["neural"]), "scores": {e: {k: scores[e][k] for k in keep} for e in scores},
             "fid_k_ratio": _ratio(scores["neural"]["fid_k"], scores["streaming"]["fid_k"]),
-            "fid_g_ratio": _ratio(scores["neural"]["fid_g"], scores["streaming"]["fid_g"]), "note": NOTE}
+            "fid_g_ratio": _ratio(scores["neural"]["fid_g"], scores["streaming"]["fid_g"]),
+            "network_fid_ratios": [_ratio(scores["network"][k], scores["streaming"][k]) for k in ("fid_k", "fid_g")],
+            "note": NOTE}
 
 
 def _reduce(values, how=np.mean):
@@ -496,12 +499,16 @@ def format_liveliness(s: dict) -> str:
     else:
         sc = r["scores"]
         body = [[TITLES[e]] + [sc[e][k] for k in ("fid_k", "fid_g", "div_k", "div_g", "n_generated")]
-                for e in ("neural", "streaming")]
+                for e in ("neural", "network", "streaming") if e in sc]
         body.append(["neural / streaming", r["fid_k_ratio"], r["fid_g_ratio"], None, None, None])
+        if "network_fid_ratios" in r:
+            body.append(["network alone / streaming", *r["network_fid_ratios"], None, None, None])
         out += ["", table(f"Neural realism vs the salsa mocap it never saw ({', '.join(r['held_out'])}: "
                           f"{r['reference_s']:.0f} s, {sc['neural']['n_reference']} windows), {r['dances']} dances "
                           "per engine", ["generated", "FID_k", "FID_g", "Div_k", "Div_g", "windows"], body,
-                          [0, 2, 2, 2, 2, 0], ["streaming: from a database without the held-out clips", r["note"]])]
+                          [0, 2, 2, 2, 2, 0], ["streaming: from a database without the held-out clips; network alone: "
+                                               "the neural engine without its spread post-filter (--paper)",
+                                               r["note"]])]
     body = []
     for name, t in s["neural_targets"].items():
         scale = _pct if name in PERCENT_TARGETS else (lambda v: v)

@@ -268,3 +268,28 @@ def normaliser(sequences: list[Sequence]) -> tuple[np.ndarray, np.ndarray]:
     n = allp.shape[1]
     mean[n - 2:], std[n - 2:] = 0.0, 1.0      # contacts stay 0/1 (trained with a logistic loss)
     return mean.astype(np.float32), std.astype(np.float32)
+
+
+def pose_spread(sequences: list[Sequence], mean: np.ndarray, std: np.ndarray) -> np.ndarray:
+    """Each pose channel's standard deviation within one sequence, normalised, averaged over the sequences.
+
+    The "global variance" of the training data (Toda & Tokuda 2007): how far a dance strays from its
+    own average pose, which ``restore_spread`` gives back to generated motion.
+    """
+    return np.mean([((s.poses - mean) / std).std(axis=0) for s in sequences], axis=0).astype(np.float32)
+
+
+def restore_spread(z: np.ndarray, spread: np.ndarray, channels: int, cap: float) -> np.ndarray:
+    """Global-variance post-filter: widen each of the first ``channels`` channels of normalised poses ``z``
+    about the dance's own mean until it strays as far as the training data does (``pose_spread``), by at
+    most ``cap`` times.
+
+    A network trained on squared and angular errors regresses toward the mean: its joint angles reach
+    their extremes less often than mocap (docs/neural.md, "Realism"). The gain is constant over the
+    dance, so timing, posture and the order of moves are untouched; only the amplitude grows.
+    """
+    z = np.array(z, dtype=np.float32)
+    mu, sd = z[:, :channels].mean(axis=0), z[:, :channels].std(axis=0)
+    gain = np.clip(spread[:channels] / np.maximum(sd, 1e-6), 1.0, cap)
+    z[:, :channels] = mu + (z[:, :channels] - mu) * gain
+    return z

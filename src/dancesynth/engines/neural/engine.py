@@ -31,10 +31,15 @@ from ...types import MotionClip, MusicFeatures
 from ..beatgrid import beat_grid, fit_style, fit_summary
 from ..footlock import FootLockState, lock_feet
 from ..stitch import Rendered
-from .data import TRAIN_FPS, beat_phase, conditioning, decode_pose, hamming_weights, music_vectors
+from .data import TRAIN_FPS, beat_phase, conditioning, decode_pose, hamming_weights, music_vectors, restore_spread
 from .store import StoredModel, find_model, load_model, model_id
 
 DEFAULT_GENRE = "salsa"   # the genre of the shipped model
+
+
+# Most the post-filter widens a channel: 1.2 and 1.3 brought FID_g from 1.5x the streaming engine's to 1.1x;
+# 1.3 put hands in the head and joint speeds near their limits, 2 made the hands jitter (docs/neural.md).
+SPREAD_CAP = 1.2
 
 
 def motif_plan(n_beats: int, template, transitions, rng: np.random.Generator) -> np.ndarray:
@@ -88,8 +93,12 @@ def _warp_positions(t_out: np.ndarray, anchors) -> np.ndarray:
 
 
 def generate(model: StoredModel, music: MusicFeatures, grid, motifs: np.ndarray, *, fps: float,
-             seed: int = 0) -> MotionClip:
-    """Run the generator over ``grid`` (a ``BeatGrid``) and return the dance at ``fps``."""
+             seed: int = 0, spread_cap: float = SPREAD_CAP) -> MotionClip:
+    """Run the generator over ``grid`` (a ``BeatGrid``) and return the dance at ``fps``.
+
+    ``spread_cap`` > 1 widens the generated motion toward the training data's spread by at most
+    that factor (``data.restore_spread``); 1 leaves the network's motion as it is.
+    """
     import torch
 
     from ...threads import torch_threads
@@ -112,6 +121,8 @@ def generate(model: StoredModel, music: MusicFeatures, grid, motifs: np.ndarray,
             y, state = gen.step(prev, cond[t:t + 1], music_w[t:t + 1], window[t:t + 1], state)
             prev = gen.feedback(y)
             out[t] = prev[0].numpy()
+    if spread_cap > 1.0 and model.spread is not None:   # every channel but the foot contacts
+        out = restore_spread(out, model.spread, out.shape[1] - 2, spread_cap)
     poses = out * model.std + model.mean
     local, root, contacts = decode_pose(poses, TRAIN_FPS)
     sk = model.skeleton
@@ -161,12 +172,14 @@ def neural_dance(music: MusicFeatures, db: MotionDatabase, config, *, timings: d
     grid = beat_grid(music, subdivide=subdivide)
     seed = 0 if config.seed is None else int(config.seed)
     motifs = motif_plan(grid.n_intervals, model.template, model.transitions, np.random.default_rng(seed))
-    clip = generate(model, music, grid, motifs, fps=config.fps, seed=seed)
+    cap = SPREAD_CAP if config.restore_spread else 1.0
+    clip = generate(model, music, grid, motifs, fps=config.fps, seed=seed, spread_cap=cap)
     timings["synthesis_s"] = time.perf_counter() - t
     # The generator makes its own motion (its warp rates are per frame): no beat pieces to count.
     run = EngineRun(style=style.name, genre=style.genre, style_fingerprint=style.fingerprint, subdivide=subdivide,
                     grid_times_s=grid.times_s, warp_rates=clip.meta["warp_rates"], step_s=(timings["synthesis_s"],),
                     motifs={"motif_plan": motifs}, fit=fit_summary(fit, music, None),
                     extra={"graph_cached": True, **model_id(model),
+                           "spread_cap": cap if model.spread is not None else 1.0,
                            "realtime_factor": music.duration_s / max(timings["synthesis_s"], 1e-9)})
     return clip, run

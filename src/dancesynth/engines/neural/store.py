@@ -66,6 +66,7 @@ class StoredModel:
     motif_words: np.ndarray | None = None   # (N, 13, D) real words of the genre, the motif words to dance ...
     word_motifs: np.ndarray | None = None   # (N,) ... and their motifs
     medoids: np.ndarray | None = None       # (K, 13, D) the word nearest each motif (for a motif without words)
+    spread: np.ndarray | None = None        # (P,) the training data's spread per channel (data.pose_spread)
 
     def motif_words_for(self, plan, rng: np.random.Generator) -> np.ndarray:
         """One real word (13, D) of each planned motif, drawn at random (its medoid word where none is stored).
@@ -84,7 +85,7 @@ class StoredModel:
 
 def save_model(path: Path, generator, skeleton: Skeleton, mean, std, genre: str, info: dict,
                start_poses: np.ndarray, template=None, transitions=None, *, motif_words=None, word_motifs=None,
-               medoids=None) -> None:
+               medoids=None, spread=None) -> None:
     """Write ``path`` (.pt) and its .json summary atomically."""
     import torch
 
@@ -100,6 +101,8 @@ def save_model(path: Path, generator, skeleton: Skeleton, mean, std, genre: str,
         blob["medoids"] = torch.as_tensor(medoids, dtype=torch.float16)
     blob["motif_words"] = torch.as_tensor(motif_words, dtype=torch.float16)   # what the network is conditioned on
     blob["word_motifs"] = torch.as_tensor(word_motifs, dtype=torch.int16)
+    if spread is not None:
+        blob["spread"] = torch.as_tensor(spread)
     with atomic_output(path, "wb") as fh:
         torch.save(blob, fh)
     with atomic_output(path.with_suffix(".json"), "w") as fh:
@@ -127,6 +130,7 @@ def load_model(path: Path) -> StoredModel:
         start = blob["start_poses"].float().numpy()
         motifs = [blob[k].numpy() if k in blob else None for k in ("template", "transitions")]
         words = [blob[k].float().numpy() if k in blob else None for k in ("motif_words", "word_motifs", "medoids")]
+        spread = blob["spread"].numpy() if "spread" in blob else None
         if words[1] is not None:
             words[1] = words[1].astype(np.int64)
         if words[0] is None or (motifs[0] is None) != (gen.n_motifs == 0) or \
@@ -138,4 +142,4 @@ def load_model(path: Path) -> StoredModel:
                          "retrain it with 'dancesynth train' or reinstall dancesynth") from None
     gen.eval()
     return StoredModel(gen, skeleton, blob["mean"].numpy(), blob["std"].numpy(), str(blob["genre"]), info,
-                       start, path, *motifs, *words)
+                       start, path, *motifs, *words, spread)

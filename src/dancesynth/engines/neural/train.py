@@ -23,7 +23,7 @@ import torch
 
 from ...errors import InputError
 from ...motion.database import MotionDatabase, open_database
-from .data import TRAIN_FPS, Sequence, conditioning, normaliser, pose_dims, style_sequences
+from .data import TRAIN_FPS, Sequence, conditioning, normaliser, pose_dims, pose_spread, style_sequences
 from .losses import Body, Perceptual, PoseLoss
 from .model import NeuralConfig, PoseGenerator
 from .store import save_model, user_dir
@@ -279,7 +279,8 @@ def train(genre: str = "salsa", config: str | NeuralConfig = "small", *, device:
     words, word_motifs = motif_words_store(ts, seed=seed)
     save_model(path, gen, ts.skeleton, ts.mean, ts.std, ts.genre, info,
                start_poses([s for s in ts.train if s.rate == 1.0]), ts.template, ts.transitions,
-               motif_words=words, word_motifs=word_motifs, medoids=ts.medoids)
+               motif_words=words, word_motifs=word_motifs, medoids=ts.medoids,
+               spread=pose_spread(ts.train, ts.mean, ts.std))
     info["path"] = str(path)
     info["plot"] = str(plot_curve(info, path.with_suffix(".png")))
     return info
