@@ -16,7 +16,7 @@ from .. import rotations as rot
 from ..errors import InputError
 from ..kinematics import clip_fk
 from ..motion.resample import resample_clip_arrays
-from ..motion.roles import find_roles
+from ..motion.roles import find_roles, head_centre
 from ..types import MotionClip
 from .motion_metrics import check_motion, foot_skate, pfc
 
@@ -135,15 +135,7 @@ def hand_in_head_frames(motion: MotionClip, *, radius_m: float | None = DEFAULT_
         raise InputError(f"global_pos must be (frames, joints, 3) = {motion.local_rot.shape[:2] + (3,)}, "
                          f"got {pos.shape}; pass kinematics.clip_fk(motion)[1]")
     head = pos[:, roles.head]
-    eyes = [int(k) for k in sk.children(roles.head) if "eye" in sk.names[k].lower()]
-    if eyes:
-        top = pos[:, eyes].mean(axis=1)
-        centre = top
-    elif roles.head in sk.end_sites:
-        top = head + rot.apply(np.asarray(global_rot)[:, roles.head], sk.end_sites[roles.head])
-        centre = 0.5 * (head + top)
-    else:
-        top = centre = head
+    centre, top = head_centre(sk, roles.head, global_rot, pos)
     if radius_m is None:
         radius = 0.5 * float(np.median(np.linalg.norm(top - head, axis=-1)))
         if not radius > 0:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import rotations as rot
 from ..errors import ModelError
 from ..types import Skeleton
 
@@ -95,6 +96,22 @@ def find_roles(skeleton: Skeleton) -> JointRoles:
         hips=(legs[0][0], legs[1][0]), knees=(legs[0][1], legs[1][1]), ankles=(legs[0][2], legs[1][2]),
         toes=(toes[0], toes[1]),
         shoulders=(arms[0][0], arms[1][0]), elbows=(arms[0][1], arms[1][1]), wrists=(arms[0][2], arms[1][2]))
+
+
+def head_centre(skeleton: Skeleton, head: int, global_rot, global_pos) -> tuple[np.ndarray, np.ndarray]:
+    """(F, 3) centre and top of the head joint ``head``: the centre is the midpoint of the eyes when the head
+    has children named like eyes, else the middle of the head bone (the head joint to its End Site), else
+    the head joint itself; the top is the eyes' midpoint or the End Site (the head joint when neither)."""
+    pos = np.asarray(global_pos, dtype=np.float64)
+    joint = pos[:, head]
+    eyes = [int(k) for k in skeleton.children(head) if "eye" in skeleton.names[k].lower()]
+    if eyes:
+        top = pos[:, eyes].mean(axis=1)
+        return top, top
+    if head in skeleton.end_sites:
+        top = joint + rot.apply(np.asarray(global_rot)[:, head], skeleton.end_sites[head])
+        return 0.5 * (joint + top), top
+    return joint, joint
 
 
 def bone_masses(skeleton: Skeleton, body_mass_kg: float = 70.0) -> np.ndarray:

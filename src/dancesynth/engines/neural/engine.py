@@ -4,7 +4,9 @@ song -> beat grid and per-beat intensity -> one target motif per beat (the
 choreography level) and a real word of that motif to show the network -> the
 acLSTM runs frame by frame at ``data.TRAIN_FPS``, told the phase of the music's
 beat, the motif words of this beat and the next and, through AdaIN, the beat's
-intensity -> poses decoded, resampled to the output rate, planted feet held with IK.
+intensity -> each channel widened toward the mocap's spread (``data.restore_spread``) ->
+poses decoded, resampled to the output rate, planted feet held and hands kept out of
+the head with IK.
 
 Beats land on the music because the generator is conditioned on the music's beat
 phase: it learned from the mocap that a motion beat (a pose where the body's
@@ -30,6 +32,7 @@ from ...provenance import EngineRun
 from ...types import MotionClip, MusicFeatures
 from ..beatgrid import beat_grid, fit_style, fit_summary
 from ..footlock import FootLockState, lock_feet
+from ..handclear import keep_hands_out_of_head
 from ..stitch import Rendered
 from .data import TRAIN_FPS, beat_phase, conditioning, decode_pose, hamming_weights, music_vectors, restore_spread
 from .store import StoredModel, find_model, load_model, model_id
@@ -149,6 +152,7 @@ def generate(model: StoredModel, music: MusicFeatures, grid, motifs: np.ndarray,
                       # no source motion to follow: every frame is a "new run", so a planted foot stays put
                       new_run=np.ones(n_out, dtype=bool))
     local, _ = lock_feet(sk, roles, frames, FootLockState(), fps=fps)
+    local = keep_hands_out_of_head(sk, roles, local, root, fps)
     return MotionClip(sk, fps, root, local, contacts=contacts,
                       meta={"motifs": motifs, "grid_times_s": grid.times_s,
                             "warp_rates": np.diff(src_s) * fps, "warp_anchors_s": anchors[0]})
