@@ -6,7 +6,7 @@ import pytest
 from dancesynth import rotations as rot
 from dancesynth.engines.handclear import keep_hands_out_of_head
 from dancesynth.eval.artefacts import hand_in_head_frames, joint_steps_deg
-from dancesynth.kinematics import fk, two_bone_ik
+from dancesynth.kinematics import chain_local_rotations, fk, two_bone_ik
 from dancesynth.motion.database import open_database
 from dancesynth.motion.roles import find_roles, head_centre
 from dancesynth.types import MotionClip
@@ -31,8 +31,7 @@ def swept():
     target = g_pos[a:b, chain[2]] + ease[:, None] * (path - g_pos[a:b, chain[2]])
     rows, cols = np.arange(a, b)[:, None], np.array(chain)
     new = two_bone_ik(g_rot[rows, cols], g_pos[rows, cols], (0, 1, 2), target)
-    parent = g_rot[a:b, sk.parents[chain[0]]]
-    local[rows, cols] = rot.mul(rot.inv(np.stack([parent, new[:, 0], new[:, 1]], axis=1)), new)
+    local[rows, cols] = chain_local_rotations(g_rot[a:b, sk.parents[chain[0]]], new)
     return MotionClip(sk, fps, root, local), roles, (a, b)
 
 

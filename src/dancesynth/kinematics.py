@@ -158,3 +158,9 @@ def two_bone_ik(g_rot, g_pos, chain, target, hinge_axis=None, *, bend_toward=Non
     new_top = rot.mul(swing, g_rot[:, top])
     new_mid = rot.mul(swing, mid_rot)
     return np.stack([new_top, new_mid, g_rot[:, end]], axis=1)
+
+
+def chain_local_rotations(parent_rot, chain_rot):
+    """Local rotations (F, 3, 4) of a (top, middle, end) chain from its solved global ones (``two_bone_ik``)
+    and the global rotation (F, 4) of the top joint's parent."""
+    return rot.mul(rot.inv(np.stack([parent_rot, chain_rot[:, 0], chain_rot[:, 1]], axis=1)), chain_rot)

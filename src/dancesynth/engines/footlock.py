@@ -36,7 +36,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from .. import rotations as rot
-from ..kinematics import fk, two_bone_ik
+from ..kinematics import chain_local_rotations, fk, two_bone_ik
 from ..motion.features import foot_points
 from ..motion.roles import JointRoles
 from ..types import MotionClip, Skeleton
@@ -260,9 +260,7 @@ def lock_feet(skeleton: Skeleton, roles: JointRoles, frames: Rendered, state: Fo
     new = two_bone_ik(g_rot[rows, chains], g_pos[rows, chains], (0, 1, 2),
                       np.concatenate([leg[2] for leg in legs]), bend_toward=np.concatenate([leg[3] for leg in legs]),
                       pole_weight=params.pole_weight)
-    parent = g_rot[sel, skeleton.parents[chains[:, 0]]]
-    # Local rotations of hip, knee and ankle from the solved global ones.
-    solved = rot.mul(rot.inv(np.stack([parent, new[:, 0], new[:, 1]], axis=1)), new)
+    solved = chain_local_rotations(g_rot[sel, skeleton.parents[chains[:, 0]]], new)   # hip, knee, ankle
     weight = np.concatenate([leg[4] for leg in legs])
     out = local_rot.copy()
     out[rows, chains] = rot.nlerp(local_rot[rows, chains], solved, weight[:, None] * np.ones(3))

@@ -11,10 +11,9 @@ direction per visit, so the arm never jumps; frames away from a visit are left e
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import label
+from scipy.ndimage import label, maximum_filter1d
 
-from .. import rotations as rot
-from ..kinematics import fk, two_bone_ik
+from ..kinematics import chain_local_rotations, fk, two_bone_ik
 from ..motion.roles import JointRoles, head_centre
 from ..types import Skeleton
 
@@ -24,10 +23,7 @@ EASE_S = 0.2
 
 def _envelope(need: np.ndarray, radius: int) -> np.ndarray:
     """At least ``need`` at every frame, rising and falling smoothly over ``radius`` frames."""
-    if radius < 1 or not need.any():
-        return need
-    padded = np.pad(need, radius)
-    dilated = np.lib.stride_tricks.sliding_window_view(padded, 2 * radius + 1).max(axis=1)
+    dilated = maximum_filter1d(need, 2 * radius + 1, mode="constant")
     window = np.hanning(2 * radius + 3)[1:-1]
     # Each smoothed frame averages dilated frames within ``radius``, all >= its own need.
     return np.convolve(np.pad(dilated, radius, mode="edge"), window / window.sum(), mode="valid")
@@ -36,10 +32,8 @@ def _envelope(need: np.ndarray, radius: int) -> np.ndarray:
 def _push(away: np.ndarray, direction: np.ndarray, clearance: float) -> np.ndarray:
     """How far along ``direction`` (unit) a wrist at ``away`` from the head's centre must move to reach the
     clearance sphere (0 where it is outside already): the positive root of |away + s d| = clearance."""
-    along = away @ direction
-    inside = np.einsum("ij,ij->i", away, away) < clearance ** 2
-    return np.where(inside, -along + np.sqrt(np.maximum(along ** 2 - np.einsum("ij,ij->i", away, away)
-                                                        + clearance ** 2, 0.0)), 0.0)
+    along, gap = away @ direction, clearance ** 2 - np.einsum("ij,ij->i", away, away)
+    return np.where(gap > 0, -along + np.sqrt(np.maximum(along ** 2 + gap, 0.0)), 0.0)
 
 
 def keep_hands_out_of_head(skeleton: Skeleton, roles: JointRoles, local_rot: np.ndarray, root_pos: np.ndarray,
@@ -75,6 +69,5 @@ def keep_hands_out_of_head(skeleton: Skeleton, roles: JointRoles, local_rot: np.
             continue
         rows, cols = sel[:, None], np.array(chain)
         new = two_bone_ik(g_rot[rows, cols], g_pos[rows, cols], (0, 1, 2), g_pos[sel, chain[2]] + shift[sel])
-        parent = g_rot[sel, skeleton.parents[chain[0]]]
-        out[rows, cols] = rot.mul(rot.inv(np.stack([parent, new[:, 0], new[:, 1]], axis=1)), new)
+        out[rows, cols] = chain_local_rotations(g_rot[sel, skeleton.parents[chain[0]]], new)
     return out

@@ -124,7 +124,9 @@ def generate(model: StoredModel, music: MusicFeatures, grid, motifs: np.ndarray,
             y, state = gen.step(prev, cond[t:t + 1], music_w[t:t + 1], window[t:t + 1], state)
             prev = gen.feedback(y)
             out[t] = prev[0].numpy()
-    if spread_cap > 1.0 and model.spread is not None:   # every channel but the foot contacts
+    if model.spread is None:   # a model trained before the post-filter: the network alone
+        spread_cap = 1.0
+    if spread_cap > 1.0:       # every channel but the foot contacts
         out = restore_spread(out, model.spread, out.shape[1] - 2, spread_cap)
     poses = out * model.std + model.mean
     local, root, contacts = decode_pose(poses, TRAIN_FPS)
@@ -154,7 +156,7 @@ def generate(model: StoredModel, music: MusicFeatures, grid, motifs: np.ndarray,
     local, _ = lock_feet(sk, roles, frames, FootLockState(), fps=fps)
     local = keep_hands_out_of_head(sk, roles, local, root, fps)
     return MotionClip(sk, fps, root, local, contacts=contacts,
-                      meta={"motifs": motifs, "grid_times_s": grid.times_s,
+                      meta={"motifs": motifs, "grid_times_s": grid.times_s, "spread_cap": spread_cap,
                             "warp_rates": np.diff(src_s) * fps, "warp_anchors_s": anchors[0]})
 
 
@@ -176,14 +178,14 @@ def neural_dance(music: MusicFeatures, db: MotionDatabase, config, *, timings: d
     grid = beat_grid(music, subdivide=subdivide)
     seed = 0 if config.seed is None else int(config.seed)
     motifs = motif_plan(grid.n_intervals, model.template, model.transitions, np.random.default_rng(seed))
-    cap = SPREAD_CAP if config.restore_spread else 1.0
-    clip = generate(model, music, grid, motifs, fps=config.fps, seed=seed, spread_cap=cap)
+    clip = generate(model, music, grid, motifs, fps=config.fps, seed=seed,
+                    spread_cap=SPREAD_CAP if config.restore_spread else 1.0)
     timings["synthesis_s"] = time.perf_counter() - t
     # The generator makes its own motion (its warp rates are per frame): no beat pieces to count.
     run = EngineRun(style=style.name, genre=style.genre, style_fingerprint=style.fingerprint, subdivide=subdivide,
                     grid_times_s=grid.times_s, warp_rates=clip.meta["warp_rates"], step_s=(timings["synthesis_s"],),
                     motifs={"motif_plan": motifs}, fit=fit_summary(fit, music, None),
                     extra={"graph_cached": True, **model_id(model),
-                           "spread_cap": cap if model.spread is not None else 1.0,
+                           "spread_cap": clip.meta["spread_cap"],
                            "realtime_factor": music.duration_s / max(timings["synthesis_s"], 1e-9)})
     return clip, run
