@@ -32,11 +32,12 @@ FOLDERS = {
     "cmu_mb_fbx2bvh": ("asf", True, {31}),
     "perfume_mit": ("cm", True, {23}),
     "cmu_iclone_cc": ("cm", False, {100, 101}),
+    "g1_moves_ccby": ("cm", False, {31}),   # the Unitree G1 robot's kinematics (its README): 1.29 m
 }
 # Standing heights (rest pose, joints and End Sites) of adults are 1.4-2.1 m; CMU subject
 # 94's skeleton is 1.33 m in ASF units x 0.056444 (the top joint is mid-head).
 HEIGHT_RANGE_M = (1.4, 2.1)
-SHORT_SKELETONS = {"94_01": 1.3}
+SHORT_SKELETONS = {"94_01": 1.3, **{p.stem: 1.25 for p in shared_mocap_files() if p.parent.name == "g1_moves_ccby"}}
 ROUND_TRIP_FRAMES = 300
 
 
@@ -58,12 +59,23 @@ def test_fixtures_present():
 
 
 @requires_shared
-def test_shared_set_is_complete():
-    counts = {}
-    for p in shared_mocap_files():
-        counts[p.parent.name] = counts.get(p.parent.name, 0) + 1
-    assert counts == {"cmu_daz_salsa": 26, "cmu_max_cgspeed": 4, "cmu_mb_fbx2bvh": 3, "perfume_mit": 3,
-                      "cmu_iclone_cc": 20}, f"unexpected contents of {SHARED_MOCAP}"
+def test_shared_set_has_what_the_product_needs():
+    """What the product reads from the shared set is there: every genre pattern the default database
+    is built from matches files, every clip the bundled database names exists, and every folder of
+    BVH files has its expectations below (so a new folder is read by these tests, not skipped)."""
+    import tomllib
+
+    from dancesynth.motion.database import open_database
+
+    genres = tomllib.loads((REPO / "scripts" / "default_genres.toml").read_text())["genres"]
+    for genre, patterns in genres.items():
+        for pattern in [patterns] if isinstance(patterns, str) else patterns:
+            assert sorted(SHARED_MOCAP.glob(pattern)), f"{genre}: {pattern} matches nothing in {SHARED_MOCAP}"
+    for style in open_database().styles.values():
+        for source in style.clip_sources:
+            assert (SHARED_MOCAP / source).is_file(), f"{style.name} was built from {source}, missing in {SHARED_MOCAP}"
+    unknown = {p.parent.name for p in shared_mocap_files()} - FOLDERS.keys()
+    assert not unknown, f"shared mocap folders without expectations in FOLDERS: {sorted(unknown)}"
 
 
 @pytest.mark.parametrize("path", ALL_FILES)
