@@ -256,4 +256,6 @@ def test_stored_motif_words_are_the_least_ambiguous_of_their_motif():
 
     assert (margin(words) > 0).all()                                    # each nearest its own motif's centroid
     for m in np.unique(ids):   # the kept are the deepest of the drawn
-        assert margin(words[ids == m]).min() >= np.sort(margin(drawn[drawn_ids == m]))[::-1][:6].min() - 1e-9
+        # float32 embeddings of a batch of 6 and of 24 round differently on some CPUs: compare to 1e-5
+        kept, best = margin(words[ids == m]).min(), np.sort(margin(drawn[drawn_ids == m]))[::-1][:6].min()
+        assert kept >= best - 1e-5 * max(1.0, abs(best))
