@@ -418,13 +418,17 @@ TARGETS = {
     "database": "fuzz.database_target",
     "cli": "fuzz.cli_target",
     "web": "fuzz.web_target",
+    "character_gltf": "fuzz.character_target:GLTF",
+    "character_vrm": "fuzz.character_target:VRM",
+    "character_bvh": "fuzz.character_target:BVH_RIG",
+    "character_bonemap": "fuzz.character_target:BONE_MAP",
 }
 
 
 def run_target(name: str, n: int, seed: int, workdir: Path, *, failures_dir: Path | None = None,
                hang_s: float = HANG_S, memory_mb: float = MEMORY_MB, progress=None) -> TargetResult:
     """Make ``n`` cases of target ``name`` for ``seed``, run them, and save every failing input."""
-    spec = TARGETS[name] + ":TARGET"
+    spec = TARGETS[name] if ":" in TARGETS[name] else TARGETS[name] + ":TARGET"
     target = load_target(spec)
     target.prepare(workdir)
     cases = target.cases(n, seed, workdir)

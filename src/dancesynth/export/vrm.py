@@ -100,11 +100,16 @@ def vrma_bytes(clip: MotionClip, bones: dict[str, int]) -> bytes:
     if up[hips] != -1 or any(up[j] < 0 for j in joints if j != hips):
         raise InputError("cannot write a VRM Animation: every humanoid bone must be below the hips")
     _, rest = fk(np.tile(IDENTITY, (sk.n_joints, 1)), sk.offsets[0], sk.offsets, sk.parents)
+    floor = np.zeros(3)
+    if rest[hips, 1] <= 1e-3:   # a BVH rig rooted at the origin (OFFSET 0 0 0): its floor is its lowest joint
+        floor[1] = rest[:, 1].min()
+    rest = rest - floor
     if rest[hips, 1] <= 1e-3:
         raise InputError("cannot write a VRM Animation: the rig's rest pose must stand on the floor (y = 0) "
                          "with the hips above it")
 
     g_rot, g_pos = clip_fk(clip)
+    g_pos = g_pos - floor
     node_of = {j: k for k, j in enumerate(joints)}
     nodes = [g.Node(name=sk.names[j], children=[node_of[c] for c in joints if up[c] == j],
                     translation=[float(v) for v in (rest[j] - rest[up[j]] if j != hips else rest[j])])

@@ -30,6 +30,7 @@ from __future__ import annotations
 import io
 import math
 import re
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -345,7 +346,9 @@ def _parse_motion(body: str, motion_lineno: int, name: str, raw: _Raw) -> None:
     values = None
     try:
         # numpy's C parser: ~10x faster than splitting in Python for big files.
-        values = np.loadtxt(io.StringIO(data), dtype=np.float64, comments=None, ndmin=2)
+        with warnings.catch_warnings():   # "input contained no data": the check below says it in our words
+            warnings.simplefilter("ignore")
+            values = np.loadtxt(io.StringIO(data), dtype=np.float64, comments=None, ndmin=2)
     except ValueError:
         pass
     if values is None or values.shape != (n_frames, n_ch):

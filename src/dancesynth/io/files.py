@@ -1,4 +1,6 @@
-"""Writing files so that a failure never leaves a partial output behind."""
+"""User files at the boundary: read only what they may be read for (regular files, bounded sizes,
+nothing outside a folder they name), and written so that a failure never leaves a partial output
+behind."""
 
 from __future__ import annotations
 
@@ -6,10 +8,50 @@ import contextlib
 import dataclasses
 import os
 import shutil
+import stat
 import tempfile
 from pathlib import Path
 
 from ..errors import InputError
+
+
+def read_user_file(path, *, limit: int, what: str, prefix: int | None = None) -> bytes:
+    """The bytes of a regular file of at most ``limit`` bytes (``prefix``: only its first that many,
+    and it must have them). A device, pipe or folder is refused: ``/dev/zero`` would fill memory and
+    ``/dev/stdin`` block. ``what`` names the file in the error (``"bone map x.toml"``)."""
+    try:
+        with open(path, "rb", buffering=0, opener=_nonblocking) as fh:
+            info = os.fstat(fh.fileno())
+            if not stat.S_ISREG(info.st_mode):
+                raise InputError(f"{what} is not a regular file (a device, pipe or folder); give a file")
+            want = info.st_size if prefix is None else prefix
+            if want > limit:
+                raise InputError(f"{what} is {info.st_size / 2**20:.1f} MB; at most {limit / 2**20:g} MB is read")
+            data = fh.read(want + (prefix is None))   # one more: a file that grew past its size
+    except OSError as exc:
+        raise InputError(f"cannot read {what}: {exc.strerror or exc}") from None
+    except ValueError:   # a NUL byte in the path
+        raise InputError(f"cannot read {what}: its name holds a NUL byte") from None
+    if prefix is not None and len(data) < prefix:
+        raise InputError(f"{what} is truncated: {len(data)} of the {prefix} bytes it should hold")
+    if prefix is None and len(data) > limit:
+        raise InputError(f"{what} is over {limit / 2**20:g} MB, the most that is read")
+    return data
+
+
+def _nonblocking(path, flags):
+    # A FIFO opened for reading would block until a writer appears; O_NONBLOCK lets the check above see it.
+    return os.open(path, flags | os.O_NONBLOCK)
+
+
+def inside_folder(folder, relative: str) -> Path | None:
+    """``folder / relative`` resolved (symlinks followed), or None when it lies outside ``folder``."""
+    root = Path(folder).resolve()
+    try:
+        target = (root / relative).resolve()
+    except (OSError, ValueError, RuntimeError):   # a NUL byte, a symlink loop
+        return None
+    return target if root in target.parents else None
 
 
 @contextlib.contextmanager

@@ -94,8 +94,25 @@ def source_character(skeleton: Skeleton) -> Character:
 
 
 def load_character(spec, *, bone_map=None) -> Character:
-    """A character from a built-in name or a file (see the module docstring); ``bone_map``: a TOML path."""
-    from .humanoid import find_bones, read_bone_map
+    """A character from a built-in name or a file (see the module docstring); ``bone_map``: a TOML path.
+    Its humanoid bones and rest pose are checked here (``humanoid.check_bones``), before any dance is made."""
+    character = _load(spec, bone_map)
+    return checked(character, what=character.source.name if character.source is not None else character.name)
+
+
+def checked(character: Character, *, what: str) -> Character:
+    """``character`` if a dance can be put on it (``humanoid.check_bones``), else ``InputError``."""
+    from ..kinematics import fk
+    from .humanoid import check_bones
+
+    sk = character.skeleton
+    _, rest = fk(character.rest_rot, character.rest_root, sk.offsets, sk.parents)
+    check_bones(sk, character.bones, rest, what=what)
+    return character
+
+
+def _load(spec, bone_map) -> Character:
+    from .humanoid import BONES, REQUIRED, find_bones, read_bone_map
     from .rigs import LAYOUTS
 
     overrides = read_bone_map(bone_map) if bone_map is not None else None
@@ -118,8 +135,11 @@ def load_character(spec, *, bone_map=None) -> Character:
     from .gltf_character import load_gltf_character
 
     character = load_gltf_character(path)
-    if overrides or not character.bones:
-        character = replace(character, bones=find_bones(character.skeleton, overrides, what=path.name))
+    if overrides or any(b not in character.bones for b in REQUIRED):
+        # A VRM's own table names what it names; the bone map, then the rig's names and hierarchy, the rest.
+        names = {b: character.skeleton.names[j] for b, j in character.bones.items() if b in BONES}
+        character = replace(character, bones=find_bones(character.skeleton, {**names, **(overrides or {})},
+                                                        what=path.name))
     return character
 
 

@@ -22,6 +22,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
+from ..io.bvh import MAX_JOINTS
 from ..types import Skeleton
 from .character import Character
 from .gltf_file import invalid_file, open_gltf
@@ -32,6 +33,7 @@ from .rigs import JOINT_CHANNELS, ROOT_CHANNELS
 _VRM0_THUMBS = {f"{s}{old}": f"{s}{new}" for s in ("left", "right")
                 for old, new in (("ThumbProximal", "ThumbMetacarpal"), ("ThumbIntermediate", "ThumbProximal"))}
 _SCALE_TOL = 1e-4   # relative spread of a scale's three factors still called uniform
+MAX_NODE_DEPTH = 256   # nodes from a scene root down to any node (a rig's deepest finger is about 40)
 
 
 def load_gltf_character(path) -> Character:
@@ -71,14 +73,18 @@ def _character(gltf, path: Path) -> Character:
         raise InputError(f"{name} has no skin: a character needs a skinned mesh (a rigged model) or a VRM "
                          "avatar's humanoid bones")
 
+    _check_depth(parent, name)
+
     def ancestors(i: int) -> list[int]:
-        """``i`` and the nodes above it, up to its scene root (a cycle is a corrupt file)."""
+        """``i`` and the nodes above it, up to its scene root (at most ``MAX_NODE_DEPTH``)."""
         chain = [i]
         while parent[chain[-1]] >= 0:
             chain.append(parent[chain[-1]])
-            if len(chain) > n:
-                raise InputError(f"{name} is corrupt: its node hierarchy has a cycle")
         return chain
+
+    joints = set().union(*skins, human.values())
+    if len(joints) > 4 * MAX_JOINTS:   # before any walk up the tree: the skeleton's count is checked below
+        raise InputError(f"{name} has {len(joints)} skin joints; a character has at most {MAX_JOINTS}")
 
     if "hips" in human:
         root = human["hips"]
@@ -95,7 +101,7 @@ def _character(gltf, path: Path) -> Character:
     # Every skin joint and humanoid bone under the root joins, with the nodes on the way to it. (Not
     # every node under it: a skinless VRM's mesh nodes there are often squashed by non-uniform scales.)
     members = {root}
-    for j in set().union(*skins, human.values()):
+    for j in joints:
         chain = ancestors(j)
         if root in chain:
             members.update(chain[:chain.index(root)])
@@ -104,6 +110,9 @@ def _character(gltf, path: Path) -> Character:
         i = stack.pop()
         order.append(i)
         stack.extend(reversed([c for c in nodes[i].children or [] if c in members]))
+    if len(order) > MAX_JOINTS:
+        raise InputError(f"{name}'s skeleton has {len(order)} joints; a character has at most {MAX_JOINTS} (BVH, "
+                         "which every dance can be written as, holds no more)")
     index = {node: k for k, node in enumerate(order)}
 
     above = ancestors(root)[1:]
@@ -142,6 +151,25 @@ def _character(gltf, path: Path) -> Character:
     return Character(name=_title(gltf.extensions or {}) or path.stem, skeleton=skeleton, bones=bones,
                      rest_rot=rest_rot, rest_root=offsets[0].copy(), mesh=mesh, source=path,
                      nodes=tuple(order), armature=armature, kind=kind)
+
+
+def _check_depth(parent: list[int], name: str) -> None:
+    """Every node at most ``MAX_NODE_DEPTH`` below its scene root, and no cycle: each node is walked
+    once (depths remembered), so this is linear in the number of nodes."""
+    depth = [0 if p < 0 else -1 for p in parent]
+    for i in range(len(parent)):
+        path = []
+        while depth[i] < 0:
+            path.append(i)
+            i = parent[i]
+            if len(path) > MAX_NODE_DEPTH:
+                raise InputError(f"{name} is corrupt: its node hierarchy has a cycle or is over {MAX_NODE_DEPTH} "
+                                 "nodes deep")
+        for k, j in enumerate(reversed(path), 1):
+            depth[j] = depth[i] + k
+        if path and depth[path[0]] > MAX_NODE_DEPTH:
+            raise InputError(f"{name}'s node hierarchy is {depth[path[0]]} nodes deep; at most {MAX_NODE_DEPTH} "
+                             "are read")
 
 
 def _humanoid(extensions: dict, name: str) -> tuple[str, dict]:

@@ -7,7 +7,9 @@ matrices; an unskinned mesh by its node's rest world transform), so it lands in 
 frame in metres. Each vertex keeps its four heaviest joints, a skin joint outside the skeleton
 counted as its nearest ancestor in it. Colours are the material's base colour (factor x COLOR_0 x
 the texture at the vertex's UV, nearest texel; a VRM 0.x MToon's ``_MainTex`` when the glTF
-material has none), linear RGB; a texture that cannot be read is drawn mid grey. Triangles of
+material has none), linear RGB; a texture that cannot be read, or of more than
+``MAX_TEXTURE_PIXELS``, is drawn mid grey, and one larger than ``KEPT_TEXTURE_SIDE`` on a side is
+averaged down to it (a vertex's colour needs no more). Triangles of
 see-through material (alpha MASK or BLEND) whose corners are mostly transparent are dropped, and
 double-sided ones get a back face, as the renderer culls.
 """
@@ -16,6 +18,7 @@ from __future__ import annotations
 
 import io
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +32,10 @@ _SRGB_TO_LINEAR = np.where(np.arange(256) <= 10, np.arange(256) / 255 / 12.92,
                            ((np.arange(256) / 255 + 0.055) / 1.055) ** 2.4).astype(np.float32)
 _MID_GREY = float(_SRGB_TO_LINEAR[128])           # what a texture that cannot be read is drawn as
 _MAX_INFLUENCES = 4
+MAX_TEXTURE_PIXELS = 8192 * 4096   # decoded at most (a 4096 x 4096 RGBA texture is 64 MB in memory)
+KEPT_TEXTURE_SIDE = 2048
+TEXTURE_FORMATS = ("PNG", "JPEG", "WEBP", "DDS")   # what glTF and its extensions carry; no other decoder runs
+MAX_VERTICES = 2_000_000           # drawn in all (an avatar has 10^4-10^5)
 
 
 def user_mesh(gltf, path: Path, skins: list[list[int]], index: dict[int, int], ancestors, above: set) -> Mesh | None:
@@ -93,6 +100,8 @@ def user_mesh(gltf, path: Path, skins: list[list[int]], index: dict[int, int], a
              if (part := _primitive(reader, prim, *bound, skinned=skinned, what=what)) is not None and len(part[2])]
     if not parts:
         return None
+    if sum(len(part[0]) for part in parts) > MAX_VERTICES:
+        raise reader.corrupt(f"its meshes have over {MAX_VERTICES} vertices; a character is drawn with at most that many")
     base = np.cumsum([0] + [len(part[0]) for part in parts[:-1]])
     positions, normals, triangles, joints, weights, colours = (
         np.concatenate([part[k] + (b if k == 2 else 0) for part, b in zip(parts, base)]) for k in range(6))
@@ -345,7 +354,8 @@ class _MeshReader(GltfReader):
         if not textures:
             return
         _ = self.buffers   # read once, before the threads share them
-        with ThreadPoolExecutor(max_workers=min(8, os.cpu_count() or 1)) as pool:
+        with warnings.catch_warnings(), ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
+            warnings.simplefilter("ignore")   # a decoder's complaint about a texture is not the user's error
             list(pool.map(self.texture, {t for t, *_ in textures}))
 
     def _image(self, i) -> np.ndarray | None:
@@ -357,7 +367,12 @@ class _MeshReader(GltfReader):
             data = self.image_bytes(i)
             if data is None:
                 return None
-            with Image.open(io.BytesIO(data)) as img:
-                return np.asarray(img if img.mode in ("RGB", "RGBA") else img.convert("RGBA"))
+            with Image.open(io.BytesIO(data), formats=TEXTURE_FORMATS) as img:
+                if img.width * img.height > MAX_TEXTURE_PIXELS:   # read from the header: nothing decoded yet
+                    return None
+                img.draft("RGB", (KEPT_TEXTURE_SIDE, KEPT_TEXTURE_SIDE))   # a JPEG decodes smaller at once
+                rgb = img if img.mode in ("RGB", "RGBA") else img.convert("RGBA")
+                factor = -(-max(rgb.size) // KEPT_TEXTURE_SIDE)
+                return np.asarray(rgb.reduce(factor) if factor > 1 else rgb)
         except Exception:  # noqa: BLE001 -- decoders fail in many ways; an unreadable texture is drawn grey
             return None

@@ -112,7 +112,7 @@ def find_bones(skeleton: Skeleton, overrides: dict[str, str] | None = None, *, w
     if None not in legs:   # where legs and spine meet (CC rigs hang the legs from a pelvis below it)
         hips = _common_ancestor(parents, *legs)
         bones["hips"] = _common_ancestor(parents, hips, head) if head >= 0 else hips
-    if head >= 0 and "hips" in bones and _is_ancestor(parents, bones["hips"], head):
+    if head >= 0 and "hips" in bones and bones["hips"] != head and _is_ancestor(parents, bones["hips"], head):
         _spine(parents, bones, head)
 
     for s, side in zip("lr", SIDES):
@@ -120,6 +120,7 @@ def find_bones(skeleton: Skeleton, overrides: dict[str, str] | None = None, *, w
             bones.update(_fingers(skeleton, parsed, bones[side + "Hand"], side))
     for bone, joint in overrides.items():
         bones[bone] = skeleton.index(joint)
+    _distinct(skeleton, bones, what)   # a bone map that puts two bones on one joint says so first
     missing = [b for b in REQUIRED if b not in bones]
     if missing:
         table = "\n".join(f'{b} = "<joint name>"' for b in missing)
@@ -128,6 +129,65 @@ def find_bones(skeleton: Skeleton, overrides: dict[str, str] | None = None, *, w
             f"{', '.join(skeleton.names[:12])}{', ...' if skeleton.n_joints > 12 else ''}); name them in a TOML "
             f"file given with --bone-map, e.g.: [bones] {table.replace(chr(10), ' ')}")
     return bones
+
+
+# Each chain's bones, top down: every one must hang below the one before it.
+CHAINS = (("hips", "spine", "chest", "upperChest", "neck", "head"),) + tuple(
+    c for s in SIDES for c in (("hips", s + "UpperLeg", s + "LowerLeg", s + "Foot", s + "Toes"),
+                                ("spine", s + "Shoulder", s + "UpperArm", s + "LowerArm", s + "Hand")))
+MIN_LEG_M = 0.05          # shorter legs are no body's (and give the retargeter nothing to scale by)
+MIN_PART_OF_LEG = 0.1     # a thigh or shin shorter than this share of the leg is collapsed
+MIN_HIP_WIDTH = 0.02      # the upper legs this far apart across, as a share of the leg, or no left and right
+MAX_EXTENT_M = 1e4        # no joint of a rest pose farther from the origin (a giant is 100 m; beyond, numbers overflow)
+
+
+def check_bones(skeleton: Skeleton, bones: dict[str, int], rest: np.ndarray, *, what: str = "the rig") -> None:
+    """Refuse a humanoid mapping a dance cannot be put on, before any dance is made: a required bone
+    missing, two bones on one joint, a bone not below the bone above it (the head on the hips), or a
+    rest pose (``rest``: (J, 3) world positions, Y up) with collapsed legs, the upper legs on one
+    point, or the head not above the hips."""
+    missing = [b for b in REQUIRED if b not in bones]
+    if missing:
+        raise InputError(f"{what} has no {', '.join(missing)} bone; name them in a TOML file given with --bone-map")
+    _distinct(skeleton, bones, what)
+    for chain in CHAINS:
+        present = [b for b in chain if b in bones]
+        for above, below in zip(present, present[1:]):
+            if not _is_ancestor(skeleton.parents, bones[above], bones[below]):
+                raise InputError(f"{what}: bone {below} ({skeleton.names[bones[below]]}) does not hang below {above} "
+                                 f"({skeleton.names[bones[above]]}); fix the bone map or the rig's hierarchy")
+    if not np.all(np.isfinite(rest)) or np.abs(rest).max() > MAX_EXTENT_M:
+        raise InputError(f"{what}'s rest pose is not finite or reaches over {MAX_EXTENT_M:g} m from its origin")
+    leg = leg_length(rest, bones)
+    if not leg >= MIN_LEG_M:
+        raise InputError(f"{what}'s legs are {leg * 100:.1f} cm long in its rest pose; a character needs legs "
+                         f"(at least {MIN_LEG_M * 100:g} cm)")
+    for s in SIDES:
+        for top, end in (("UpperLeg", "LowerLeg"), ("LowerLeg", "Foot")):
+            size = np.linalg.norm(rest[bones[s + end]] - rest[bones[s + top]])
+            if size < MIN_PART_OF_LEG * leg:
+                raise InputError(f"{what}'s {s} {'thigh' if top == 'UpperLeg' else 'shin'} is "
+                                 f"{size * 100:.1f} cm long against a {leg * 100:.0f} cm leg: collapsed bones")
+    across = rest[bones["leftUpperLeg"]] - rest[bones["rightUpperLeg"]]
+    if np.hypot(across[0], across[2]) < MIN_HIP_WIDTH * leg:
+        raise InputError(f"{what}'s left and right upper legs are on one point (or one above the other) in its rest "
+                         "pose: it has no left and right to dance with")
+    if rest[bones["head"], 1] - rest[bones["hips"], 1] < MIN_PART_OF_LEG * leg:
+        raise InputError(f"{what}'s head is not above its hips in the rest pose; a character stands upright, Y up")
+
+
+def _distinct(skeleton: Skeleton, bones: dict[str, int], what: str) -> None:
+    seen = {}
+    for bone in BONES:
+        j = bones.get(bone)
+        if j is None:
+            continue
+        if not 0 <= j < skeleton.n_joints:
+            raise InputError(f"{what}: bone {bone} is joint {j}, which does not exist")
+        if j in seen:
+            raise InputError(f"{what}: bones {seen[j]} and {bone} are one joint ({skeleton.names[j]}); each humanoid "
+                             "bone needs its own")
+        seen[j] = bone
 
 
 def _fingers(skeleton: Skeleton, parsed, hand: int, side: str) -> dict[str, int]:
@@ -194,17 +254,24 @@ def _spine(parents, bones: dict, head: int) -> None:
         bones["neck"] = neck[0]
 
 
+MAX_BONE_MAP_BYTES = 1 << 20   # a bone map names about 50 bones: a few kB
+
+
 def read_bone_map(path) -> dict[str, str]:
     """The ``[bones]`` table of a TOML bone-map file."""
     import tomllib
-    from pathlib import Path
 
+    from ..io.files import read_user_file
+
+    data = read_user_file(path, limit=MAX_BONE_MAP_BYTES, what=f"bone map {path}")
     try:
-        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except OSError as e:
-        raise InputError(f"cannot read bone map {path}: {e.strerror or e}") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise InputError(f"bone map {path} is not valid TOML: {e}") from None
+        data = tomllib.loads(data.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise InputError(f"bone map {path} is not UTF-8 text") from None
+    except RecursionError:
+        raise InputError(f"bone map {path} nests too deep to be a bone map") from None
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"bone map {path} is not valid TOML: {str(e).splitlines()[0] if str(e) else e}") from None
     table = data.get("bones")
     if not isinstance(table, dict) or not table:
         raise InputError(f'bone map {path} needs a [bones] table, e.g. [bones] hips = "pelvis"')

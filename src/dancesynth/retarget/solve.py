@@ -105,6 +105,10 @@ def retarget(clip: MotionClip, character: Character, source_bones: dict[str, int
         chunk = g[a:b]
         local = rot.mul(rot.inv(chunk[:, tgt.parents[1:]]), chunk[:, 1:])
         chunk[:, 1:] = local
+    if not (np.isfinite(root_pos).all() and np.isfinite(g).all()):   # never a file full of NaN
+        from ..errors import InputError
+
+        raise InputError(f"cannot put the dance on {character.name}: its rig gives no finite pose (degenerate bones?)")
     return MotionClip(tgt, clip.fps, root_pos, g, meta=dict(clip.meta), provenance=clip.provenance)
 
 
