@@ -12,7 +12,8 @@ from fuzz.harness import run_cases, run_target, failure_lines, load_target
 
 SEED = 0
 # Cases per target: a few hundred where a case takes milliseconds, fewer where it runs a whole command.
-SAMPLE = {"bvh": 200, "audio": 120, "midi": 300, "toml": 300, "database": 150, "cli": 30, "web": 100}
+SAMPLE = {"bvh": 200, "audio": 120, "midi": 300, "toml": 300, "database": 150, "cli": 30, "web": 100,
+          "character_gltf": 90, "character_vrm": 90, "character_bvh": 150, "character_bonemap": 150}
 
 
 @pytest.fixture(scope="module")
