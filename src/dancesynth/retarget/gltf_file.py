@@ -136,9 +136,10 @@ def _check_gltf_json(raw, path: Path) -> None:
         raise InputError(f"{name} is not a glTF 2.0 file (JSON without an asset version 2.x)")
     views = raw.get("bufferViews")
     for i, view in enumerate(views if isinstance(views, list) else [] if views is None else [None]):
-        fields = [view.get(k, 0) for k in ("buffer", "byteLength", "byteOffset")] if isinstance(view, dict) else [None]
-        if not all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in fields) \
-                or not isinstance(view, dict) or "byteLength" not in view or "buffer" not in view:
+        # buffer and byteLength are required, byteOffset optional: each a whole number >= 0
+        fields = [view.get("buffer"), view.get("byteLength"), view.get("byteOffset", 0)] \
+            if isinstance(view, dict) else [None]
+        if not all(type(v) is int and v >= 0 for v in fields):
             raise InputError(f"{name} is corrupt: bufferView {i} is not a buffer, byte length and offset")
     for kind in ("buffers", "images"):
         items = raw.get(kind)
