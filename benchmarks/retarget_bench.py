@@ -66,7 +66,7 @@ def main(argv=None) -> int:
         if CC_RIG.is_file():
             targets["Character Creator (bvh)"] = CC_RIG
         for st in styles:
-            if st.name in ("salsa-120-150bpm", "jpop", "mj", "whirl"):   # one per distinct skeleton layout
+            if st.name in ("salsa-120-150bpm", "pop-100-124bpm", "mj", "whirl"):   # one per distinct skeleton layout
                 targets[f"{st.name} skeleton (bvh)"] = style_rig_bvh(tmp, st)
         vrm = _vrm_avatar(tmp)
         if vrm is not None:

@@ -37,3 +37,19 @@ def bundled_db():
     from dancesynth.motion.database import open_database
 
     return open_database()
+
+
+@pytest.fixture(scope="session")
+def perfume_db(tmp_path_factory):
+    """The Perfume Dev Team's three J-pop clips as a database of one style, ``jpop``. They left the
+    bundled database (their performance data is not ours to redistribute) but remain the suite's
+    real capture on a 23-joint Perfume skeleton, read from the shared folder."""
+    import shutil
+
+    from dancesynth.motion.database import open_database
+
+    if not SHARED_MOCAP.is_dir():
+        pytest.skip(f"shared mocap not found at {SHARED_MOCAP}")
+    folder = tmp_path_factory.mktemp("perfume") / "db"
+    shutil.copytree(SHARED_MOCAP / "perfume_mit", folder / "jpop")
+    return open_database(folder)

@@ -19,7 +19,7 @@ def dances(tmp_path_factory, bundled_db):
     from dancesynth.io.bvh import write_bvh
 
     folder = tmp_path_factory.mktemp("dances")
-    for genre in ("jpop", "salsa"):
+    for genre in ("pop", "salsa"):
         clip = bundled_db.styles_of(genre)[0].clip(0)
         write_bvh(folder / f"{genre}.bvh", clip.frames(0, min(clip.n_frames, int(40 * clip.fps))))
     return folder
@@ -27,10 +27,10 @@ def dances(tmp_path_factory, bundled_db):
 
 def test_motifs_prints_the_sequence_and_writes_json_and_plot(dances, tmp_path):
     out_json, out_png = tmp_path / "m.json", tmp_path / "m.png"
-    proc = run("motifs", dances / "jpop.bvh", "--json", out_json, "--plot", out_png)
+    proc = run("motifs", dances / "pop.bvh", "--json", out_json, "--plot", out_png)
     assert proc.returncode == 0, proc.stderr
     data = json.loads(out_json.read_text())
-    assert data["genre"] == "jpop" and data["genre_guessed"]          # its own genre, found from the motifs
+    assert data["genre"] == "pop" and data["genre_guessed"]          # its own genre, found from the motifs
     assert len(data["words"]) >= 10
     starts = [w["start_s"] for w in data["words"]]
     assert starts == sorted(starts) and all(w["motif"].startswith("M") for w in data["words"])
@@ -38,7 +38,7 @@ def test_motifs_prints_the_sequence_and_writes_json_and_plot(dances, tmp_path):
     assert sum(data["signature"]) == pytest.approx(1.0, abs=1e-3)
     assert len(data["signature"]) == len(data["template"]) == data["k"]
     assert 0.0 <= data["chi2"] == min(data["chi2_by_genre"].values()) < 1.0
-    assert f"chi2 to the jpop template: {data['chi2']:.3f}" in proc.stdout
+    assert f"chi2 to the pop template: {data['chi2']:.3f}" in proc.stdout
     assert out_png.stat().st_size > 10_000 and out_png.read_bytes()[:4] == b"\x89PNG"
 
 
@@ -47,13 +47,13 @@ def test_motifs_against_a_chosen_genre(dances, tmp_path):
     proc = run("motifs", dances / "salsa.bvh", "--json", out_json)
     assert proc.returncode == 0, proc.stderr
     assert json.loads(out_json.read_text())["genre"] == "salsa"
-    proc = run("motifs", dances / "salsa.bvh", "--genre", "jpop", "--json", out_json)
+    proc = run("motifs", dances / "salsa.bvh", "--genre", "pop", "--json", out_json)
     assert proc.returncode == 0, proc.stderr
     data = json.loads(out_json.read_text())
-    assert data["genre"] == "jpop" and not data["genre_guessed"]
+    assert data["genre"] == "pop" and not data["genre_guessed"]
     assert "nearest template" not in proc.stdout
-    # a salsa dance is further from the jpop template than from the salsa one
-    assert data["chi2"] == data["chi2_by_genre"]["jpop"] > data["chi2_by_genre"]["salsa"]
+    # a salsa dance is further from the pop template than from the salsa one
+    assert data["chi2"] == data["chi2_by_genre"]["pop"] > data["chi2_by_genre"]["salsa"]
     np.testing.assert_allclose(sum(data["template"]), 1.0, atol=1e-3)
 
 

@@ -101,8 +101,8 @@ def test_the_bundled_database_ships_its_licences():
     assert size < 30e6
 
 
-def test_graphs_are_cached_and_rebuilt_when_anything_changes(bundled_db, cache):
-    style = bundled_db.styles["jpop"]
+def test_graphs_are_cached_and_rebuilt_when_anything_changes(perfume_db, bundled_db, cache):
+    style = perfume_db.styles["jpop"]
     g1, cached1 = load_graph(style)
     g2, cached2 = load_graph(style)
     assert (cached1, cached2) == (False, True)

@@ -74,10 +74,10 @@ def test_joins_are_as_smooth_as_the_mocap_itself(salsa_dance, bundled_db):
     assert root_step.max() <= np.percentile(src_root, 99.9) * 1.5
 
 
-def test_streaming_segments_join_exactly_like_one_long_render(bundled_db):
+def test_streaming_segments_join_exactly_like_one_long_render(perfume_db, bundled_db):
     song = music(30.0, 120.0)
-    a = dance(song, database=bundled_db, style="jpop", segment_s=3.0)
-    b = dance(song, database=bundled_db, style="jpop", segment_s=7.0)
+    a = dance(song, database=perfume_db, style="jpop", segment_s=3.0)
+    b = dance(song, database=perfume_db, style="jpop", segment_s=7.0)
     assert a.n_frames == b.n_frames
     assert a.provenance.summary["segments"] > b.provenance.summary["segments"]
 

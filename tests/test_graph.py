@@ -193,20 +193,20 @@ def test_graph_of_the_bundled_styles_keeps_every_start_alive(bundled_db):
         assert (g.bi_rd < GraphConfig().ths).sum() >= len(g.bi_rd) - 2 * g.n_forced
 
 
-def test_ths_controls_the_number_of_edges(bundled_db):
-    style = bundled_db.styles["jpop"]
+def test_ths_controls_the_number_of_edges(perfume_db, bundled_db):
+    style = perfume_db.styles["jpop"]
     few = build_graph(style, GraphConfig(ths=2.0, close_dead_ends=False))
     many = build_graph(style, GraphConfig(ths=8.0, close_dead_ends=False))
     assert many.n_bi_edges > few.n_bi_edges
     assert set(zip(few.bi_src, few.bi_dst)) <= set(zip(many.bi_src, many.bi_dst))
 
 
-def test_no_jump_leaves_or_lands_on_a_beat_where_a_limb_whips_round(bundled_db):
+def test_no_jump_leaves_or_lands_on_a_beat_where_a_limb_whips_round(perfume_db, bundled_db):
     # jpop's elbow turns at ~1,400 deg/s into its beat at frame 1841 (a hit): a jump there had to
     # carry that speed into the next motion and showed as a pop 1.08x the mocap's roughest 1 %.
     from dancesynth.motion.accents import fast_beats
 
-    style = bundled_db.styles["jpop"]
+    style = perfume_db.styles["jpop"]
     calm = build_graph(style, GraphConfig(close_dead_ends=False))
     fast = fast_beats(style, calm.node_frame, GraphConfig().calm_jumps)
     assert fast[np.flatnonzero(style.beat_frames == 1841)].all()

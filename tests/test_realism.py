@@ -100,7 +100,7 @@ def test_normalise_features_uses_the_reference_scale():
 # Features of bundled skeletons
 
 
-@pytest.mark.parametrize("style, joints", [(LARGEST, 21), ("mj", 24), ("jpop", 22)])
+@pytest.mark.parametrize("style, joints", [(LARGEST, 21), ("mj", 24), ("pop-100-124bpm", 19)])
 def test_feature_dimensions(db, style, joints):
     clip = db.styles[style].clip(0)
     mapping = R.smpl_joint_map(clip.skeleton)
@@ -242,7 +242,7 @@ def test_held_out_split_refuses_too_small_styles(db):
 
 def test_bad_input_raises_input_error(db, split):
     _, held, rest = split
-    jpop = db.styles["jpop"].clip(0)
+    pop = db.styles["pop-100-124bpm"].clip(0)   # another skeleton: the G1 read as a humanoid
     with pytest.raises(InputError, match="empty"):
         R.realism([], held)
     with pytest.raises(InputError, match="empty"):
@@ -250,7 +250,7 @@ def test_bad_input_raises_input_error(db, split):
     with pytest.raises(InputError, match="list"):
         R.realism(rest[0], held)
     with pytest.raises(InputError, match="skeleton"):
-        R.realism([jpop], held)
+        R.realism([pop], held)
     with pytest.raises(InputError, match="window"):
         R.realism([rest[0].frames(0, 120)], held)  # 2 s: shorter than one 5 s window
     first = rest[0]

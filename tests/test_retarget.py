@@ -24,12 +24,15 @@ CC_RIG = SHARED_MOCAP / "cmu_iclone_cc" / "002_01.bvh"
 
 
 @pytest.fixture(scope="module")
-def dances(bundled_db, bundled_song):
-    """A dance of each distinct bundled skeleton layout: Daz (salsa), CMU (mj, whirl), Perfume (jpop)."""
+def dances(bundled_db, perfume_db, bundled_song):
+    """A dance of each distinct skeleton layout: Daz (salsa), CMU (mj, whirl), G1 read as a humanoid (pop),
+    Perfume (jpop, from the shared folder)."""
     from dancesynth.api import dance
 
-    return {s: dance(bundled_song, database=bundled_db, style=s, seed=3)
-            for s in ("salsa-120-150bpm", "mj", "whirl", "jpop")}
+    out = {s: dance(bundled_song, database=bundled_db, style=s, seed=3)
+           for s in ("salsa-120-150bpm", "mj", "whirl", "pop-100-124bpm")}
+    out["jpop"] = dance(bundled_song, database=perfume_db, style="jpop", seed=3)
+    return out
 
 
 def assert_faithful(source, target, bones):
@@ -45,7 +48,7 @@ def test_every_bundled_skeleton_maps_its_humanoid_bones_by_name_and_hierarchy(bu
     expected = {"salsa-120-150bpm": {"leftUpperArm": "lShldr", "leftShoulder": "lCollar", "spine": "abdomen"},
                 "mj": {"leftUpperArm": "LeftShoulder", "leftShoulder": "LeftCollar", "leftHand": "LeftWrist"},
                 "whirl": {"leftUpperArm": "LeftArm", "leftShoulder": "LeftShoulder", "upperChest": "Spine1"},
-                "jpop": {"leftUpperArm": "LeftShoulder", "leftFoot": "LeftAnkle", "leftToes": "LeftToe"}}
+                "pop-100-124bpm": {"leftUpperArm": "leftUpperArm", "leftFoot": "leftFoot", "head": "head"}}
     for style, want in expected.items():
         sk = bundled_db.styles[style].skeleton
         bones = find_bones(sk)
@@ -67,7 +70,7 @@ def test_a_character_creator_rig_with_twist_helpers_maps_to_its_main_bones():
     assert names["leftToes"] == "CC_Base_L_ToeBase" and names["spine"] == "CC_Base_Waist"
 
 
-@pytest.mark.parametrize("style", ["salsa-120-150bpm", "mj", "whirl", "jpop"])
+@pytest.mark.parametrize("style", ["salsa-120-150bpm", "mj", "whirl", "pop-100-124bpm", "jpop"])
 @pytest.mark.parametrize("name", ["mixamo", "smpl", "cmu"])
 def test_every_style_dances_faithfully_on_every_builtin_rig(dances, style, name):
     ch = builtin_character(name)
@@ -102,15 +105,15 @@ def test_dance_cli_writes_the_users_rig_with_its_joint_names_and_offsets(tmp_pat
 
 def test_default_rig_is_the_same_whatever_the_style(tmp_path, bundled_song):
     rigs = set()
-    for style in ("salsa-120-150bpm", "jpop"):
+    for style in ("salsa-120-150bpm", "pop-100-124bpm"):
         out = tmp_path / f"{style}.bvh"
         assert cli(*["dance", TRUMPET, "--style", style, "-o", str(out), "-q"]).returncode == 0
         rigs.add(read_bvh(out).skeleton.names)
     assert rigs == {rig_skeleton("mannequin")[0].names}
     out = tmp_path / "source.bvh"
-    assert cli(*["dance", TRUMPET, "--style", "jpop", "--character", "source", "-o", str(out),
+    assert cli(*["dance", TRUMPET, "--style", "pop-100-124bpm", "--character", "source", "-o", str(out),
                 "-q"]).returncode == 0
-    assert read_bvh(out).skeleton.n_joints == 23    # Perfume's own skeleton, kept on request
+    assert read_bvh(out).skeleton.n_joints == 19    # the G1 read as a humanoid, kept on request
 
 
 def test_a_rig_without_the_required_bones_is_refused_with_the_toml_that_fixes_it(tmp_path, bundled_song):

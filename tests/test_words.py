@@ -103,8 +103,8 @@ def test_features_ignore_where_the_dancer_stands_and_faces(bundled_db):
     assert np.abs(a[1:] - a[:-1]).max() > 0.1
 
 
-def test_style_words_stay_inside_clips(bundled_db):
-    style = bundled_db.styles["jpop"]
+def test_style_words_stay_inside_clips(perfume_db, bundled_db):
+    style = perfume_db.styles["jpop"]
     words = style_words(style)
     assert len(words) == len(style.beat_frames) - style.n_clips
     assert np.all(style.clip_of_frame(words.start) == words.clip)

@@ -199,8 +199,23 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
     segment_s = config.segment_s if config.engine in ("streaming", "global") else None
     prov = make_provenance(config.engine, name, config, run, fps=config.fps, frames=clip.n_frames, timings=timings,
                            music=music, segment_s=segment_s)
-    clip.provenance = prov.with_summary(**metre_summary(clip, music, run.style, prov.summary.get("warnings", [])))
+    prov = prov.with_summary(**metre_summary(clip, music, run.style, prov.summary.get("warnings", [])))
+    clip.provenance = with_repetition(prov, db, music, config.fps)
     return clip
+
+
+def with_repetition(prov, db: MotionDatabase, music: MusicFeatures, fps: float):
+    """``prov`` with the clip and frame danced on every music beat, and the summary's account of how
+    much of the dance replays material danced in the previous minute (``eval.repetition``)."""
+    from .eval.repetition import beat_sources, repetition
+
+    style = db.styles.get(prov.style)
+    if style is None or prov.source_frames is None or not len(prov.source_frames):
+        return prov
+    sources = beat_sources(prov.source_frames, fps, music.beat_times_s, style)
+    stats = repetition([(s["clip"], s["source_beat"]) for s in sources], music.beat_times_s)
+    stats["material_minutes"] = style.duration_s / 60.0
+    return replace(prov, beat_sources=tuple(sources)).with_summary(repetition=stats)
 
 
 def metre_summary(clip: MotionClip, music: MusicFeatures, style: str, warnings: list) -> dict:
@@ -255,7 +270,8 @@ def _graph_dance(music: MusicFeatures, db: MotionDatabase, config: DanceConfig, 
     ``METRE_SHARE`` of the pieces within the natural rates, and the first dance is kept when none
     dances in three."""
     waltz = music.beats_per_bar == 3 and music.n_beats >= 4
-    fits = fit_styles(db, music, config.style, min_share=METRE_SHARE if waltz else None)
+    tag, prefer = (None, ()) if config.style else song_genres(db, music)
+    fits = fit_styles(db, music, config.style, min_share=METRE_SHARE if waltz else None, prefer=prefer)
     timings["database_s"] = time.perf_counter() - t
     clip, run = _graph_dance_fit(fits[0], music, db, config, timings, progress)
     tried = [fits[0].style.name]
@@ -269,7 +285,30 @@ def _graph_dance(music: MusicFeatures, db: MotionDatabase, config: DanceConfig, 
                 break
     if len(tried) > 1:
         run = replace(run, extra={**run.extra, "styles_tried_for_metre": tried})
+    run = replace(run, extra={**run.extra, "genre_tag": tag,
+                              "style_reason": style_reason(config.style, tag, prefer, run.genre)})
     return clip, run, timings
+
+
+def song_genres(db: MotionDatabase, music: MusicFeatures) -> tuple[str | None, tuple[str, ...]]:
+    """The song file's genre tag (ID3, Vorbis comment, MP4 atom) and the database's genres it suggests."""
+    from .engines.beatgrid import genre_preference
+    from .music.tags import read_genre_tag
+
+    tag = read_genre_tag(music.source) if music.source and Path(music.source).is_file() else None
+    return tag, genre_preference(db, tag)
+
+
+def style_reason(asked: str | None, tag: str | None, prefer: tuple, genre: str) -> str:
+    """Why the summary's style was danced: named, the song's genre tag, or the tempo and material."""
+    if asked:
+        return f"named with --style {asked}"
+    if genre in prefer:
+        return f"the song's genre tag '{tag}' suggests {', '.join(prefer)}, and '{genre}' fits its tempo"
+    why = "it fits the song's tempo best, with the most material"
+    if tag and prefer:
+        return why + f" (the genre tag '{tag}' suggests {', '.join(prefer)}, which fit the tempo less well)"
+    return why + (f" (the genre tag '{tag}' names no genre of the database)" if tag else "")
 
 
 def _graph_dance_fit(fit: StyleFit, music: MusicFeatures, db: MotionDatabase, config: DanceConfig,

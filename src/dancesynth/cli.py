@@ -83,6 +83,12 @@ def dance(song, output, character, bone_map, database, report_path, quiet, **opt
         done = f", {s['in_range_actual']:.0%} danced" if s.get("in_range_actual") is not None else ""
         warp = f"; beat pieces at {lo:g}-{hi:g}x their captured speed: {s['in_range_expected']:.0%} expected{done}"
     click.echo(f"style     {s['style']}, " + ("on the beat" if level == "beat" else f"at {level}") + warp)
+    if s.get("style_reason"):
+        click.echo(f"chosen    {s['style_reason']}")
+    rep = s.get("repetition")
+    if rep:
+        click.echo(f"material  {rep['material_minutes']:.1f} min captured; {rep['replayed_share']:.0%} of the beats replay "
+                   f"a move danced in the previous {rep['window_s']:g} s (longest run {rep['longest_repeat_beats']} beats)")
     if s.get("beats_per_bar"):
         period = s.get("dance_period_beats")
         click.echo(f"metre     {s['beats_per_bar']} beats per bar"
@@ -118,18 +124,39 @@ def dance(song, output, character, bone_map, database, report_path, quiet, **opt
 @cli.command()
 @click.option("--database", type=click.Path(file_okay=False, path_type=Path),
               help="A database folder or a folder of BVH files (default: the bundled database).")
-def styles(database):
-    """List the styles of a dance database with their tempo ranges and sizes."""
+@click.option("--tempo-map", is_flag=True,
+              help="For each tempo from 60 to 180 bpm: the styles that can dance it, at which level, with how many "
+                   "minutes of material within 0.8-1.25x of their captured speed.")
+@click.option("--step", type=click.IntRange(1, 60), default=5, show_default=True, help="Tempo step of --tempo-map.")
+def styles(database, tempo_map, step):
+    """List the styles of a dance database: tempo ranges, sizes and licences."""
     from .motion.catalog import list_styles
 
+    if tempo_map:
+        return print_tempo_map(database, step)
     rows = list_styles(database)
     ws = max(len("style"), *(len(r["name"]) for r in rows)) + 2
     wg = max(len("genre"), *(len(r["genre"]) for r in rows)) + 2
-    click.echo(f"{'style':<{ws}}{'genre':<{wg}}{'tempo (bpm)':>12}{'clips':>7}{'minutes':>9}{'beats':>7}{'joints':>8}")
+    click.echo(f"{'style':<{ws}}{'genre':<{wg}}{'tempo (bpm)':>12}{'clips':>7}{'minutes':>9}{'mirrored':>10}"
+               f"{'beats':>7}{'joints':>8}  licence")
     for r in rows:
         tempo = f"{r['tempo_min_bpm']:.0f}-{r['tempo_max_bpm']:.0f}"
-        click.echo(f"{r['name']:<{ws}}{r['genre']:<{wg}}{tempo:>12}"
-                   f"{r['clips']:>7}{r['minutes']:>9.1f}{r['beats']:>7}{r['joints']:>8}")
+        click.echo(f"{r['name']:<{ws}}{r['genre']:<{wg}}{tempo:>12}{r['clips']:>7}{r['minutes']:>9.1f}"
+                   f"{r['mirrored_minutes']:>10.1f}{r['beats']:>7}{r['joints']:>8}  {r['licence']}")
+    total = sum(r["minutes"] for r in rows)
+    click.echo(f"{len(rows)} styles, {total:.1f} minutes of captured dance")
+
+
+def print_tempo_map(database, step: int) -> None:
+    from .engines.beatgrid import MIN_MATERIAL_MINUTES, tempo_map
+    from .motion.database import open_database
+
+    rows = tempo_map(open_database(database), range(60, 181, step))
+    click.echo(f"tempo  chosen (level, minutes of material)     styles with at least {MIN_MATERIAL_MINUTES:g} min there")
+    for r in rows:
+        chosen = f"{r['chosen']} ({r['chosen_level']}, {r['chosen_minutes']:.1f})"
+        others = ", ".join(f"{x['style']} {x['level']} {x['minutes']:.1f}" for x in r["styles"]) or "none"
+        click.echo(f"{r['tempo_bpm']:>5.0f}  {chosen:<40} {others}")
 
 
 @cli.command("build-db")
@@ -144,12 +171,16 @@ def styles(database):
               help="A genres.toml mapping genres to file patterns (default: SOURCE/genres.toml or sub-folders).")
 def build_db(source, output, beats, snap, manifest):
     """Analyse a folder of BVH files (one sub-folder per genre, or a genres.toml) into a database."""
-    from .motion.database import AnalysisConfig, build_database, collect_sources, save_database
+    from .motion.database import (AnalysisConfig, build_database, collect_licences, collect_rigs, collect_sources,
+                                  collect_tempo_bins, save_database)
 
     sources = collect_sources(source, manifest)
+    rigs, licences = collect_rigs(source, manifest), collect_licences(source, manifest)
+    bins = collect_tempo_bins(source, manifest)
     with click.progressbar(length=len(sources), label="analysing", file=sys.stderr) as bar:
         db = build_database(sources, AnalysisConfig(beat_method=beats, snap_beats=snap),
-                            progress=lambda _: bar.update(1))
+                            progress=lambda _: bar.update(1), rigs=rigs, licences=licences,
+                            tempo_bins=bins)
     db.source = str(source)
     save_database(db, output)
     click.echo(f"wrote {output}: {len(db.styles)} styles from {len(sources)} files")

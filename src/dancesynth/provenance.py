@@ -54,6 +54,7 @@ class Provenance:
     run: EngineRun
     music_beat_times_s: np.ndarray = field(default_factory=_empty)
     version: str = ""
+    beat_sources: tuple = ()   # per music beat: the clip and frame danced on it (eval.repetition.beat_sources)
 
     @property
     def style(self) -> str:
@@ -93,6 +94,7 @@ class Provenance:
             "transition_times_s": run.transition_times_s, "segment_times_s": run.segment_times_s,
             "warp_rates": run.warp_rates,
             "motifs": {k: v for k, v in run.motifs.items()},
+            **({"music_beat_sources": list(self.beat_sources)} if self.beat_sources else {}),
         })
 
 

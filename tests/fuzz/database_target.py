@@ -54,7 +54,7 @@ class DatabaseTarget(Target):
         from dancesynth.io.bvh import format_bvh
         from dancesynth.motion.database import load_database
 
-        style = load_database(BUNDLED).styles["jpop"]
+        style = load_database(BUNDLED).styles["mj"]
         part = seeds / "part"
         part.mkdir(exist_ok=True)
         for k in range(2):  # 3-second excerpts: long enough for beats, short enough to analyse quickly

@@ -38,6 +38,8 @@ LEVELS = (1, 2, 0.5)       # the metrical levels fit_style tries: the beat, doub
 NEAR_SHARE = 0.05          # fits within this share of the best are equally good: prefer the beat, a big style
 METRE_SHARE = 0.5          # a song in three may take a style that fits its tempo less well, down to this share,
                            # if that style dances in three (whirl, 81 bpm, on a 100 bpm waltz: 0.55 expected)
+MIN_MATERIAL_MINUTES = 2.0  # a style with less captured motion at a song's tempo (minutes x expected share) loops
+                           # visibly: it is chosen only when named, or when no style has more
 MIN_SECTION_BEATS = 32     # a section with its own level lasts at least this many music beats (8 bars of 4)
 LOCAL_TEMPO_BEATS = 8      # the local beat period is the median over this many beats on either side
 
@@ -236,6 +238,12 @@ class StyleFit:
     def level(self) -> str:
         return level_name(self.subdivide)
 
+    @property
+    def material_minutes(self) -> float:
+        """Captured minutes the song can be danced with at this level: the style's minutes times the
+        expected share of its beat pieces within ``RATE_RANGE``."""
+        return self.style.duration_s / 60.0 * self.share
+
 
 def _fit(style: Style, motion_s: np.ndarray, beat_intervals_s: np.ndarray, subdivide, forced: bool) -> StyleFit:
     grid_s = grid_intervals_s(beat_intervals_s, subdivide)
@@ -309,14 +317,20 @@ def section_levels(motion_s: np.ndarray, beat_intervals_s: np.ndarray, beat_in_b
 
 
 def style_fits(db: MotionDatabase, beat_intervals_s, name: str | None = None, *, levels=LEVELS,
-               beat_in_bar=None, sections: bool = True) -> list[StyleFit]:
+               beat_in_bar=None, sections: bool = True, prefer: tuple[str, ...] = ()) -> list[StyleFit]:
     """Every candidate (style, level) with its expected in-range share, the best first.
 
     Candidates are the styles called ``name`` (or of genre ``name``), or all styles, each
     at every level of ``levels`` and -- with ``sections`` -- at levels that change with
     the song's tempo. The best fit has the highest share; fits within ``NEAR_SHARE`` of
     it (and reaching ``TARGET_SHARE`` if the best does) count as equally good and go to a
-    single level, the beat, the larger style, and the rate nearest 1, in that order.
+    single level, the beat, the most material at the song's tempo, and the rate nearest 1, in that order.
+
+    Unless ``name`` is given, a fit with less than ``MIN_MATERIAL_MINUTES`` of material at the
+    song's tempo (``StyleFit.material_minutes``) comes after every fit with more, and a style
+    with less than that in all comes last: a 30-second style would loop one clip over a song.
+    Among the fits as good as the best, styles of a genre in ``prefer`` (the song's genre tag,
+    ``genre_preference``) go first.
     """
     ib = np.asarray(beat_intervals_s, dtype=np.float64)
     ib = ib[np.isfinite(ib) & (ib > 0)]
@@ -330,14 +344,24 @@ def style_fits(db: MotionDatabase, beat_intervals_s, name: str | None = None, *,
         plan = section_levels(motion, ib, beat_in_bar, levels=levels) if sections else None
         if plan is not None:
             fits.append(_fit(st, motion, ib, plan, name is not None))
-    best = max(f.share for f in fits)
+    tier = {id(f): 0 if name else material_tier(f) for f in fits}
+    first = min(tier.values())
+    best = max(f.share for f in fits if tier[id(f)] == first)
 
     def key(f: StyleFit):
         rate = abs(np.log(f.rate)) if np.isfinite(f.rate) and f.rate > 0 else np.inf
-        return (not _near(f, best), not np.isscalar(f.subdivide), f.subdivide != 1, -len(f.style.beat_frames),
-                rate, -f.share)
+        return (tier[id(f)], not _near(f, best), f.style.genre not in prefer, not np.isscalar(f.subdivide),
+                f.subdivide != 1, -f.material_minutes, rate, -f.share)
 
     return sorted(fits, key=key)
+
+
+def material_tier(fit: StyleFit) -> int:
+    """0: enough material at the song's tempo; 1: a big enough style, but little of it fits the tempo;
+    2: a style smaller than ``MIN_MATERIAL_MINUTES`` altogether."""
+    if fit.style.duration_s / 60.0 < MIN_MATERIAL_MINUTES:
+        return 2
+    return 0 if fit.material_minutes >= MIN_MATERIAL_MINUTES else 1
 
 
 def _near(fit: StyleFit, best: float) -> bool:
@@ -347,9 +371,12 @@ def _near(fit: StyleFit, best: float) -> bool:
 
 def equally_good(fits: list[StyleFit]) -> list[StyleFit]:
     """Of ``style_fits``' list, the fits as good as the first, the first of each style, in order."""
-    best = max(f.share for f in fits)
+    forced = fits[0].forced
+    tier = material_tier(fits[0])
+    same = [f for f in fits if forced or material_tier(f) == tier]
+    best = max(f.share for f in same)
     out, seen = [], set()
-    for f in fits:
+    for f in same:
         if _near(f, best) and f.style.name not in seen:
             seen.add(f.style.name)
             out.append(f)
@@ -363,16 +390,16 @@ def fit_style(db: MotionDatabase, music: MusicFeatures, name: str | None = None,
 
 
 def fit_styles(db: MotionDatabase, music: MusicFeatures, name: str | None = None, *, levels=LEVELS,
-               sections: bool = True, min_share: float | None = None) -> list[StyleFit]:
+               sections: bool = True, min_share: float | None = None, prefer: tuple[str, ...] = ()) -> list[StyleFit]:
     """``fit_style`` and then the other styles that fit as well (``equally_good``), in order; with
     ``min_share``, then each remaining style's best fit that reaches it, the best first."""
     fits = style_fits(db, np.diff(music.beat_times_s), name, levels=levels, beat_in_bar=music.beat_in_bar,
-                      sections=sections)
+                      sections=sections, prefer=prefer)
     out = equally_good(fits)
     if min_share is not None:
         seen = {f.style.name for f in out}
         for f in sorted(fits, key=lambda f: -f.share):
-            if f.share >= min_share and f.style.name not in seen:
+            if f.share >= min_share and f.style.name not in seen and (f.forced or material_tier(f) == 0):
                 seen.add(f.style.name)
                 out.append(replace(f, for_metre=True))
     return out
@@ -388,6 +415,43 @@ def choose_style(db: MotionDatabase, tempo_bpm: float, name: str | None = None, 
     period = 60.0 / (tempo_bpm if tempo_bpm > 0 else FALLBACK_BPM)
     fit = style_fits(db, np.full(64, period), name, levels=levels, sections=False)[0]
     return fit.style, fit.subdivide
+
+
+def tempo_map(db: MotionDatabase, tempi_bpm, *, levels=LEVELS) -> list[dict]:
+    """For each steady tempo: every (style, level) with at least ``MIN_MATERIAL_MINUTES`` of material
+    there (``StyleFit.material_minutes``: captured minutes within ``RATE_RANGE`` of their speed), the
+    most first, and the style ``style_fits`` would choose."""
+    rows = []
+    for bpm in tempi_bpm:
+        fits = style_fits(db, np.full(64, 60.0 / float(bpm)), levels=levels, sections=False)
+        usable = sorted((f for f in fits if f.material_minutes >= MIN_MATERIAL_MINUTES),
+                        key=lambda f: -f.material_minutes)
+        rows.append({"tempo_bpm": float(bpm), "chosen": fits[0].style.name, "chosen_level": fits[0].level,
+                     "chosen_minutes": fits[0].material_minutes,
+                     "styles": [{"style": f.style.name, "level": f.level, "minutes": f.material_minutes,
+                                 "share": f.share} for f in usable]})
+    return rows
+
+
+# The bundled genres each tag family (``music.tags.genre_families``) may be danced as; a database's
+# genre named like a family (a user's "hiphop" folder) matches it as well.
+FAMILY_GENRES = {"pop": ("pop",), "hiphop": ("pop", "mj"), "salsa": ("salsa",),
+                 "indian": ("indian",), "jazz": ("pop",)}
+
+
+def genre_preference(db: MotionDatabase, tag: str | None) -> tuple[str, ...]:
+    """The database's genres a song's genre ``tag`` suggests, most specific first (none: ())."""
+    from ..music.tags import genre_families
+
+    if not tag:
+        return ()
+    genres = set(db.genres())
+    out: list[str] = []
+    for family in genre_families(tag):
+        for g in (family,) + FAMILY_GENRES.get(family, ()):
+            if g in genres and g not in out:
+                out.append(g)
+    return tuple(out)
 
 
 def fit_summary(fit: StyleFit, music: MusicFeatures, warp_rates=None) -> dict:

@@ -29,13 +29,14 @@ def list_styles(database=None) -> list[dict]:
 
         database = open_database(folder)
     return sorted((_row(s.name, s.genre, s.clip_tempo_bpm, s.n_clips, s.n_frames, s.fps, len(s.beat_frames),
-                        s.skeleton.n_joints) for s in database.styles.values()), key=lambda r: r["name"])
+                        s.skeleton.n_joints, s.licences) for s in database.styles.values()), key=lambda r: r["name"])
 
 
-def _row(name, genre, tempi, clips, frames, fps, beats, joints) -> dict:
+def _row(name, genre, tempi, clips, frames, fps, beats, joints, licences) -> dict:
+    """A listing row. ``minutes`` is captured motion; mirrored takes (none yet) would be counted apart."""
     return {"name": name, "genre": genre, "tempo_min_bpm": float(min(tempi)), "tempo_max_bpm": float(max(tempi)),
-            "clips": int(clips), "minutes": frames / fps / 60.0, "beats": int(beats), "joints": int(joints),
-            "fps": float(fps)}
+            "clips": int(clips), "minutes": frames / fps / 60.0, "mirrored_minutes": 0.0, "beats": int(beats),
+            "joints": int(joints), "fps": float(fps), "licence": ", ".join(licences)}
 
 
 def _stored_rows(folder: Path) -> list[dict]:
@@ -55,8 +56,10 @@ def _stored_rows(folder: Path) -> list[dict]:
                 tempi, starts, beats = z["clip_tempo_bpm"], z["clip_starts"], z["beat_frames"]
             if len(tempi) == 0 or len(starts) != len(tempi) + 1:
                 raise ValueError(f"style {name}: no clips, or clip ranges that disagree with its tempi")
+            licences = meta.get("licences") or [""] * len(tempi)
             rows.append(_row(name, str(meta["genre"]), tempi, len(tempi), int(starts[-1]), float(meta["fps"]),
-                             len(beats), len(meta["skeleton"]["names"])))
+                             len(beats), len(meta["skeleton"]["names"]),
+                             tuple(dict.fromkeys(str(x) or "unrecorded" for x in licences))))
     except FileNotFoundError as exc:
         raise InputError(f"{folder}: {exc.filename} is missing; rebuild the database") from None
     except (OSError, ValueError, KeyError, TypeError, AttributeError, EOFError, zipfile.BadZipFile,

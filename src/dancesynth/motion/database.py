@@ -38,6 +38,7 @@ from .resample import resample_clip_arrays
 from .roles import bone_masses, find_roles
 
 MANIFEST_NAME = "genres.toml"
+MOTION_SUFFIXES = (".bvh", ".pkl", ".amc")   # io.motion_files reads them (BVH, AIST++, CMU ASF/AMC)
 MIN_CLIP_S = 0.5  # a clip shorter than this has no 3 beats to find (and may have too few frames to differentiate)
 
 
@@ -71,6 +72,12 @@ class Style:
     beat_frames: np.ndarray      # (B,) int64 flat frame index of every motion beat
     clip_tempo_bpm: np.ndarray   # (C,)
     fingerprint: str = ""
+    clip_licences: tuple[str, ...] = ()   # per clip, from the manifest's [licences] ("" where none is recorded)
+
+    @property
+    def licences(self) -> tuple[str, ...]:
+        """The licences of the style's clips, each once ("unrecorded" for clips without one)."""
+        return tuple(dict.fromkeys(x or "unrecorded" for x in (self.clip_licences or ("",) * self.n_clips)))
 
     @property
     def n_clips(self) -> int:
@@ -115,7 +122,8 @@ class Style:
                      np.r_[self.clip_starts[:index + 1], self.clip_starts[index + 2:] - (b - a)],
                      self.local_rot[keep], self.root_pos[keep], self.contacts[keep], self.energy[keep],
                      np.where(beats >= b, beats - (b - a), beats), np.delete(self.clip_tempo_bpm, index),
-                     f"{self.fingerprint}-without-{index}")
+                     f"{self.fingerprint}-without-{index}",
+                     self.clip_licences[:index] + self.clip_licences[index + 1:])
 
 
 @dataclass(eq=False)
@@ -178,6 +186,19 @@ def analyse_clip(clip: MotionClip, config: AnalysisConfig = AnalysisConfig(), *,
 # Building
 
 
+def _genre_of(path: Path, folder: Path) -> str:
+    """A file's genre without a manifest: the genre its public set's naming states (AIST++ and Motorica
+    ``gXX`` codes, LaFAN1, Bandai Namco; a CMU trial number only for files not sorted into a sub-folder),
+    else its sub-folder's name (the folder's own name for files at the top)."""
+    from ..io.asf_amc import cmu_subject_trial
+    from ..io.motion_files import genre_from_name
+
+    named = genre_from_name(path)
+    if named and (path.parent == folder or cmu_subject_trial(path.stem) is None):
+        return named
+    return path.parent.name if path.parent != folder else folder.name
+
+
 def collect_sources(folder: Path, manifest: Path | None = None) -> list[tuple[str, Path]]:
     """(genre, bvh path) pairs of a folder: from a genres manifest or its sub-folder names.
 
@@ -192,7 +213,7 @@ def collect_sources(folder: Path, manifest: Path | None = None) -> list[tuple[st
         raise InputError(f"database folder {folder} does not exist")
     manifest = Path(manifest) if manifest else folder / MANIFEST_NAME
     try:
-        files = sorted(p for p in folder.rglob("*") if p.suffix.lower() == ".bvh" and p.is_file())
+        files = sorted(p for p in folder.rglob("*") if p.suffix.lower() in MOTION_SUFFIXES and p.is_file())
     except OSError as exc:  # a folder that changes or cannot be listed while we walk it (/proc, a lost mount)
         raise InputError(f"cannot list the files of {folder} ({exc.strerror or exc}); give a folder of BVH "
                          "files or a saved database") from None
@@ -212,11 +233,120 @@ def collect_sources(folder: Path, manifest: Path | None = None) -> list[tuple[st
             for pat in [patterns] if isinstance(patterns, str) else patterns:
                 out += [(genre, p) for p in files if fnmatch.fnmatch(p.relative_to(folder).as_posix(), pat)]
     else:
-        out = [(p.parent.name if p.parent != folder else folder.name, p) for p in files]
+        out = [(_genre_of(p, folder), p) for p in files]
     if not out:
-        raise InputError(f"no .bvh files found in {folder}: a database folder needs BVH motion files "
+        raise InputError(f"no motion files found in {folder}: a database folder needs BVH (or AIST++ .pkl, "
+                         "CMU .amc) motion files "
                          f"(one sub-folder per genre, or a {MANIFEST_NAME})")
     return out
+
+
+@dataclass(frozen=True)
+class Rig:
+    """How to read a manifest's robot-style clips: a chain map (``motion.chains``) and whether to
+    mend their one-frame snaps (``motion.cleanup``)."""
+
+    chains: dict
+    mend_snaps: bool = False
+    source: str = ""      # the chain map file, for messages and the cache key
+
+
+def _manifest_tables(folder: Path, manifest: Path | None, key: str) -> tuple[Path, list[tuple[str, dict, list[Path]]]]:
+    """The manifest's ``[KEY.NAME]`` tables, each with the BVH files its ``files`` patterns match."""
+    folder = Path(folder)
+    manifest = Path(manifest) if manifest else folder / MANIFEST_NAME
+    if not manifest.is_file():
+        return manifest, []
+    try:
+        tables = tomllib.loads(manifest.read_text()).get(key, {})
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{manifest}: not a valid genres manifest ({exc})") from None
+    if not isinstance(tables, dict) or not all(isinstance(t, dict) for t in tables.values()):
+        raise InputError(f"{manifest}: '{key}' must be tables such as [{key}.name] files = [\"glob\", ...]")
+    files = sorted(p for p in folder.rglob("*") if p.suffix.lower() in MOTION_SUFFIXES and p.is_file())
+    out = []
+    for name, spec in tables.items():
+        patterns = spec.get("files")
+        if not isinstance(patterns, list) or not all(isinstance(x, str) for x in patterns):
+            raise InputError(f"{manifest}: [{key}.{name}] needs files = [\"glob pattern\", ...]")
+        out.append((name, spec, [p for p in files if any(fnmatch.fnmatch(p.relative_to(folder).as_posix(), pat)
+                                                          for pat in patterns)]))
+    return manifest, out
+
+
+def collect_rigs(folder: Path, manifest: Path | None = None) -> dict[Path, Rig]:
+    """The manifest's ``[rigs.NAME]`` tables: BVH file -> ``Rig``, for clips on skeletons the humanoid
+    finders cannot read by name::
+
+        [rigs.g1]
+        files = ["g1_moves_ccby/*.bvh"]
+        chains = "g1_chains.toml"      # relative to the manifest
+        mend_snaps = true
+    """
+    from .chains import read_chain_map
+
+    manifest, tables = _manifest_tables(folder, manifest, "rigs")
+    out = {}
+    for name, spec, files in tables:
+        chains = spec.get("chains")
+        if not isinstance(chains, str) or not isinstance(spec.get("mend_snaps", False), bool):
+            raise InputError(f"{manifest}: [rigs.{name}] needs chains = \"map.toml\" (and optionally mend_snaps = true)")
+        path = manifest.parent / chains
+        rig = Rig(read_chain_map(path), spec.get("mend_snaps", False), path.read_text())
+        out.update({p: rig for p in files})
+    return out
+
+
+def collect_tempo_bins(folder: Path, manifest: Path | None = None) -> dict[str, float]:
+    """The manifest's ``[tempo_bin_bpm]`` table: genre -> the width of its tempo ranges, where a genre
+    spans a wide range of tempi and one style for all would warp most beat pieces (``pop = 20``)."""
+    manifest = Path(manifest) if manifest else Path(folder) / MANIFEST_NAME
+    if not manifest.is_file():
+        return {}
+    try:
+        table = tomllib.loads(manifest.read_text()).get("tempo_bin_bpm", {})
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{manifest}: not a valid genres manifest ({exc})") from None
+    if not isinstance(table, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                              and 5 <= v <= 200 for v in table.values()):
+        raise InputError(f"{manifest}: [tempo_bin_bpm] must map genres to widths of 5-200 bpm, e.g. pop = 20")
+    return {str(k): float(v) for k, v in table.items()}
+
+
+def collect_licences(folder: Path, manifest: Path | None = None) -> dict[Path, tuple[str, str]]:
+    """The manifest's ``[licences.NAME]`` tables: BVH file -> (licence, credit line)::
+
+        [licences.g1_moves]
+        files = ["g1_moves_ccby/*.bvh"]
+        licence = "CC BY 4.0"
+        credit = "G1 Moves dance motion by ..."
+    """
+    manifest, tables = _manifest_tables(folder, manifest, "licences")
+    out = {}
+    for name, spec, files in tables:
+        licence, credit = spec.get("licence"), spec.get("credit", "")
+        if not isinstance(licence, str) or not isinstance(credit, str):
+            raise InputError(f"{manifest}: [licences.{name}] needs licence = \"...\" (and credit = \"...\")")
+        out.update({p: (licence, credit) for p in files})
+    return out
+
+
+def read_clip(path: Path, rig: Rig | None = None) -> MotionClip:
+    """A clip of the database's sources (any format ``io.motion_files`` reads), on a humanoid skeleton
+    when a ``rig`` says how."""
+    from ..io.motion_files import read_motion  # the readers are only needed when building
+
+    clip = read_motion(path)
+    if rig is None:
+        return clip
+    from .chains import collapse
+    from .cleanup import remove_snaps
+
+    clip = collapse(clip, rig.chains, what=str(path))
+    if rig.mend_snaps:
+        clip, mended = remove_snaps(clip)
+        clip.meta["snaps_mended"] = mended
+    return clip
 
 
 def _leg_length(skeleton: Skeleton) -> float:
@@ -225,15 +355,17 @@ def _leg_length(skeleton: Skeleton) -> float:
 
 
 def build_database(sources: Iterable[tuple[str, Path]], config: AnalysisConfig = AnalysisConfig(),
-                   *, progress: Callable[[str], None] | None = None) -> MotionDatabase:
-    """Read, analyse and group BVH clips into styles."""
-    from ..io.bvh import read_bvh  # the BVH reader is only needed when building
-
+                   *, progress: Callable[[str], None] | None = None, rigs: dict[Path, Rig] | None = None,
+                   licences: dict[Path, tuple[str, str]] | None = None,
+                   tempo_bins: dict[str, float] | None = None) -> MotionDatabase:
+    """Read, analyse and group BVH clips into styles (``rigs``: how to read some of them, ``collect_rigs``;
+    ``licences``: each file's licence, ``collect_licences``; ``tempo_bins``: a genre's own tempo-range
+    width, ``collect_tempo_bins``)."""
     groups: dict[tuple, list] = {}
     for genre, path in sources:
         if progress:
             progress(str(path))
-        clip = read_bvh(path)
+        clip = read_clip(path, (rigs or {}).get(Path(path)))
         fps = clip.fps / max(1, round(clip.fps / config.max_fps)) if clip.fps > config.max_fps * 1.01 else clip.fps
         key = (genre, clip.skeleton.names, tuple(clip.skeleton.parents))
         groups.setdefault(key, []).append((Path(path), clip, fps))
@@ -253,7 +385,8 @@ def build_database(sources: Iterable[tuple[str, Path]], config: AnalysisConfig =
                 continue
             rot_, pos_, _ = resample_clip_arrays(clip.local_rot, clip.root_pos, None, clip.fps, fps)
             pos_ = pos_ * (_leg_length(canon) / _leg_length(clip.skeleton))
-            c = MotionClip(canon, fps, pos_, rot_, meta={"name": path.stem, "source": str(path)})
+            c = MotionClip(canon, fps, pos_, rot_, meta={"name": path.stem, "source": str(path),
+                                                         "licence": (licences or {}).get(path, ("",))[0]})
             a = analyse_clip(c, config)
             if len(a.beat_frames) >= config.min_beats_per_clip:
                 analysed.append((c, a))
@@ -261,7 +394,8 @@ def build_database(sources: Iterable[tuple[str, Path]], config: AnalysisConfig =
         if not analysed:
             continue
         base = genre if topologies_per_genre[genre] == 1 else f"{genre}-{len(names)}j"
-        for name, part in _split_by_tempo(base, analysed, config.tempo_bin_bpm, config.min_style_minutes).items():
+        width = (tempo_bins or {}).get(genre, config.tempo_bin_bpm)
+        for name, part in _split_by_tempo(base, analysed, width, config.min_style_minutes).items():
             styles[name] = _style_from(name, genre, canon, fps, part)
     if not styles:
         raise InputError(f"no clip had at least {config.min_beats_per_clip} motion beats: the database "
@@ -327,6 +461,7 @@ def _style_from(name, genre, skeleton, fps, analysed) -> Style:
         energy=np.concatenate([a.energy for _, a in analysed]).astype(np.float32),
         beat_frames=np.concatenate([a.beat_frames + s for (_, a), s in zip(analysed, starts)]).astype(np.int64),
         clip_tempo_bpm=np.array([a.tempo_bpm for _, a in analysed]),
+        clip_licences=tuple(c.meta["licence"] for c, _ in analysed),
         fingerprint=_fingerprint(*(c.local_rot for c, _ in analysed), *(a.beat_frames for _, a in analysed)),
     )
 
@@ -393,7 +528,15 @@ def _style_from_stored(name: str, meta: dict, arr: dict, fingerprint: str) -> St
     return Style(name=name, genre=str(meta["genre"]), skeleton=sk, fps=fps, clip_names=clips, clip_sources=sources,
                  clip_starts=starts, local_rot=rot, root_pos=root_pos, contacts=arr["contacts"].astype(bool),
                  energy=arr["energy"], beat_frames=beats, clip_tempo_bpm=arr["clip_tempo_bpm"],
-                 fingerprint=fingerprint)
+                 fingerprint=fingerprint, clip_licences=_licences(meta, len(clips)))
+
+
+def _licences(meta: dict, n_clips: int) -> tuple[str, ...]:
+    """A stored style's per-clip licences (none recorded: empty strings)."""
+    got = meta.get("licences") or [""] * n_clips
+    if not isinstance(got, list) or len(got) != n_clips or not all(isinstance(x, str) for x in got):
+        raise ValueError("the clip licences disagree with the clip list")
+    return tuple(got)
 
 
 def save_database(db: MotionDatabase, folder: Path) -> None:
@@ -418,7 +561,7 @@ def _save_database(db: MotionDatabase, folder: Path) -> None:
                 clip_tempo_bpm=st.clip_tempo_bpm)
         index["styles"][name] = {
             "genre": st.genre, "fps": st.fps, "skeleton": _skeleton_to_json(st.skeleton),
-            "clips": list(st.clip_names), "sources": list(st.clip_sources)}
+            "clips": list(st.clip_names), "sources": list(st.clip_sources), "licences": list(st.clip_licences)}
     with open(folder / "database.json", "w") as fh:
         json.dump(index, fh, indent=1)
 
@@ -503,7 +646,12 @@ def open_database(path: Path | None = None, config: AnalysisConfig = AnalysisCon
     if (path / "database.json").is_file():
         return load_database(path)
     sources = collect_sources(path)
+    rigs, licences, bins = collect_rigs(path), collect_licences(path), collect_tempo_bins(path)
     h = hashlib.blake2b(repr((FORMAT_VERSION, config)).encode(), digest_size=16)
+    for rig in {id(r): r for r in rigs.values()}.values():
+        h.update(rig.source.encode())
+    if (path / MANIFEST_NAME).is_file():
+        h.update((path / MANIFEST_NAME).read_bytes())
     # The analysis code is part of the key, so improving it re-analyses cached folders.
     package = Path(__file__).resolve().parents[1]
     for code in sorted([*package.joinpath("motion").glob("*.py"), package / "beat_tracking.py",
@@ -518,7 +666,7 @@ def open_database(path: Path | None = None, config: AnalysisConfig = AnalysisCon
             return load_database(cached)
         except ModelError:
             pass  # a damaged cache entry is rebuilt below
-    db = build_database(sources, config, progress=progress)
+    db = build_database(sources, config, progress=progress, rigs=rigs, licences=licences, tempo_bins=bins)
     db.source = str(path)
     save_database(db, cached)
     return load_database(cached)

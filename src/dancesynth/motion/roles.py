@@ -82,7 +82,8 @@ def find_roles(skeleton: Skeleton) -> JointRoles:
     if min(legs[0] + legs[1]) < 0:
         raise ModelError(
             f"cannot find both legs in skeleton ({', '.join(skeleton.names[:8])}, ...): "
-            "name the ankles e.g. LeftFoot/RightFoot or LeftAnkle/RightAnkle")
+            "name the ankles e.g. LeftFoot/RightFoot or LeftAnkle/RightAnkle; a robot-style skeleton of "
+            "one-axis joints needs a chain map ([rigs] in genres.toml, e.g. scripts/g1_chains.toml)")
     toes = []
     for _, _, ankle in legs:
         kids = skeleton.children(ankle)
