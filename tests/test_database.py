@@ -96,7 +96,8 @@ def test_the_bundled_database_ships_its_licences():
     text = (BUNDLED_DATABASE / "README.md").read_text()
     assert "mocap.cs.cmu.edu" in text and "NSF EIA-0196217" in text
     assert (BUNDLED_DATABASE / "LICENSES" / "CMU_LICENSE.txt").is_file()
-    assert (BUNDLED_DATABASE / "LICENSES" / "perfume-dev_example-bvh_LICENSE.txt").is_file()
+    assert (BUNDLED_DATABASE / "LICENSES" / "G1-Moves_DATASET_CARD.md").is_file()       # CC BY 4.0
+    assert (BUNDLED_DATABASE / "LICENSES" / "unitree_ros_LICENSE_BSD-3-Clause.txt").is_file()
     size = sum(p.stat().st_size for p in BUNDLED_DATABASE.rglob("*") if p.is_file())
     assert size < 30e6
 

@@ -58,11 +58,11 @@ def test_shipped_model_is_read_not_rebuilt_and_matches_the_bundled_database(ship
     assert shipped.k == DEFAULT_K and shipped.embedder.kind == "learned"
     assert set(shipped.genres) == set(bundled_db.genres())
     # The template of a genre is the average signature of its dances, recomputed here from scratch.
-    style = bundled_db.styles["freestyle"]
+    style = bundled_db.styles["mj"]
     words = style_words(style)
     ids = shipped.assign(words.features)
     sigs = [shipped.signature(ids[words.clip == c]) for c in range(style.n_clips)]
-    np.testing.assert_allclose(shipped.templates["freestyle"], np.mean(sigs, axis=0), atol=1e-6)
+    np.testing.assert_allclose(shipped.templates["mj"], np.mean(sigs, axis=0), atol=1e-6)
     for g in shipped.genres:
         t = shipped.transitions[g]
         np.testing.assert_allclose(t.sum(axis=1), 1.0, atol=1e-9)

@@ -90,8 +90,8 @@ def test_dance_cli_neural_writes_a_bvh(tmp_path, capsys):
 
 
 def test_genre_without_a_model_is_a_clear_error(music):
-    with pytest.raises(ModelError, match="dancesynth train --style freestyle"):
-        dance(music, engine="neural", style="freestyle")
+    with pytest.raises(ModelError, match="dancesynth train --style pop"):
+        dance(music, engine="neural", style="pop")
 
 
 def test_missing_and_corrupt_weights(tmp_path):
