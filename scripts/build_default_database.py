@@ -12,8 +12,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from dancesynth.motion.database import (BUNDLED_DATABASE, build_database, collect_licences, collect_rigs,
-                                       collect_sources, collect_tempo_bins, save_database)
+from dancesynth.motion.database import BUNDLED_DATABASE, build_database, collect_sources, manifest_options, save_database
 
 REPO = Path(__file__).resolve().parents[1]
 LICENCES = ["CMU_LICENSE.txt", "yuki-koyama_bvh11_LICENSE.txt",
@@ -50,14 +49,14 @@ def main() -> int:
     args = ap.parse_args()
     manifest = REPO / "scripts" / "default_genres.toml"
     sources = collect_sources(args.mocap, manifest=manifest)
-    licences = collect_licences(args.mocap, manifest)
+    options = manifest_options(args.mocap, manifest)
+    licences = options["licences"]
     unshippable = [str(p) for _, p in sources if licences.get(p, ("",))[0] not in SHIPPABLE]
     if unshippable:
         print(f"refusing to bundle files without a redistributable licence: {unshippable[:5]}", file=sys.stderr)
         return 1
     db = build_database(sources, progress=lambda p: print("analysing", Path(p).relative_to(args.mocap), file=sys.stderr),
-                        rigs=collect_rigs(args.mocap, manifest), licences=licences,
-                        tempo_bins=collect_tempo_bins(args.mocap, manifest))
+                        **options)
     db.source = "shared/data/mocap (see scripts/default_genres.toml)"
     db.notes = {"acknowledgement": ACK, "licences": "see LICENSES/ and README.md in this folder"}
     for s in db.styles.values():

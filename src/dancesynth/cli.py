@@ -171,16 +171,13 @@ def print_tempo_map(database, step: int) -> None:
               help="A genres.toml mapping genres to file patterns (default: SOURCE/genres.toml or sub-folders).")
 def build_db(source, output, beats, snap, manifest):
     """Analyse a folder of BVH files (one sub-folder per genre, or a genres.toml) into a database."""
-    from .motion.database import (AnalysisConfig, build_database, collect_licences, collect_rigs, collect_sources,
-                                  collect_tempo_bins, save_database)
+    from .motion.database import AnalysisConfig, build_database, collect_sources, manifest_options, save_database
 
     sources = collect_sources(source, manifest)
-    rigs, licences = collect_rigs(source, manifest), collect_licences(source, manifest)
-    bins = collect_tempo_bins(source, manifest)
+    options = manifest_options(source, manifest)
     with click.progressbar(length=len(sources), label="analysing", file=sys.stderr) as bar:
         db = build_database(sources, AnalysisConfig(beat_method=beats, snap_beats=snap),
-                            progress=lambda _: bar.update(1), rigs=rigs, licences=licences,
-                            tempo_bins=bins)
+                            progress=lambda _: bar.update(1), **options)
     db.source = str(source)
     save_database(db, output)
     click.echo(f"wrote {output}: {len(db.styles)} styles from {len(sources)} files")

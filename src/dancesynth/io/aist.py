@@ -35,6 +35,7 @@ from scipy.spatial.transform import Rotation
 
 from .. import kinematics
 from ..errors import InputError
+from .files import read_user_file
 from ..retarget.rigs import rig_skeleton
 from ..types import MotionClip, Skeleton
 
@@ -103,18 +104,7 @@ def load_pickle_arrays(path, *, max_bytes: int = MAX_PICKLE_BYTES):
     and the like are refused before anything is called).
     """
     path = Path(path)
-    if not path.exists():
-        raise InputError(f"{path}: no such file; check the path")
-    if path.is_dir():
-        raise InputError(f"{path}: is a folder, not a .pkl motion file")
-    try:
-        size = path.stat().st_size
-        if size > max_bytes:
-            raise InputError(f"{path}: {size / 1e6:.1f} MB is more than a motion pickle needs "
-                             f"({max_bytes / 1e6:g} MB); the file is not an AIST++ motion")
-        data = path.read_bytes()
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read the file ({exc.strerror}); check its permissions") from exc
+    data = read_user_file(path, limit=max_bytes, what=f"motion pickle {path}")
     if not data:
         raise InputError(f"{path}: the file is empty")
     try:

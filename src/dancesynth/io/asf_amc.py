@@ -37,6 +37,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
+from .files import read_user_file
 from ..types import MotionClip, Skeleton
 from .skeleton_units import resolve_units
 
@@ -496,18 +497,7 @@ def _build_clip(asf: AsfSkeleton, values, angle_deg: bool, scale: float, fps: fl
 
 
 def _read_text(path: Path, limit: int, what: str) -> str:
-    if not path.exists():
-        raise InputError(f"{path}: no such {what} file; check the path")
-    if path.is_dir():
-        raise InputError(f"{path}: is a folder, not an {what} file")
-    try:
-        size = path.stat().st_size
-        if size > limit:
-            raise InputError(f"{path}: {size / 1e6:.1f} MB is more than an {what} file needs "
-                             f"({limit / 1e6:g} MB); the file is corrupt or not {what}")
-        data = path.read_bytes()
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read the file ({exc.strerror}); check its permissions") from exc
+    data = read_user_file(path, limit=limit, what=f"{what} file {path}")
     if not data.strip():
         raise InputError(f"{path}: the file is empty")
     if b"\x00" in data[:65536]:

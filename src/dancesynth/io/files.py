@@ -29,7 +29,7 @@ def read_user_file(path, *, limit: int, what: str, prefix: int | None = None) ->
                 raise InputError(f"{what} is {info.st_size / 2**20:.1f} MB; at most {limit / 2**20:g} MB is read")
             data = fh.read(want + (prefix is None))   # one more: a file that grew past its size
     except OSError as exc:
-        raise InputError(f"cannot read {what}: {exc.strerror or exc}") from None
+        raise InputError(f"cannot read {what}: {str(exc.strerror or exc).lower()}") from None
     except ValueError:   # a NUL byte in the path
         raise InputError(f"cannot read {what}: its name holds a NUL byte") from None
     if prefix is not None and len(data) < prefix:

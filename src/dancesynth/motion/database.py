@@ -251,16 +251,29 @@ class Rig:
     source: str = ""      # the chain map file, for messages and the cache key
 
 
-def _manifest_tables(folder: Path, manifest: Path | None, key: str) -> tuple[Path, list[tuple[str, dict, list[Path]]]]:
-    """The manifest's ``[KEY.NAME]`` tables, each with the BVH files its ``files`` patterns match."""
-    folder = Path(folder)
-    manifest = Path(manifest) if manifest else folder / MANIFEST_NAME
+def _manifest_table(manifest: Path, key: str) -> dict:
+    """The manifest's ``[KEY]`` table ({} without a manifest or such a table)."""
     if not manifest.is_file():
-        return manifest, []
+        return {}
     try:
-        tables = tomllib.loads(manifest.read_text()).get(key, {})
+        return tomllib.loads(manifest.read_text()).get(key, {})
     except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{manifest}: not a valid genres manifest ({exc})") from None
+
+
+def manifest_options(folder: Path, manifest: Path | None = None) -> dict:
+    """What a manifest says beyond the genres, as ``build_database``'s keyword arguments."""
+    return {"rigs": collect_rigs(folder, manifest), "licences": collect_licences(folder, manifest),
+            "tempo_bins": collect_tempo_bins(folder, manifest)}
+
+
+def _manifest_tables(folder: Path, manifest: Path | None, key: str) -> tuple[Path, list[tuple[str, dict, list[Path]]]]:
+    """The manifest's ``[KEY.NAME]`` tables, each with the motion files its ``files`` patterns match."""
+    folder = Path(folder)
+    manifest = Path(manifest) if manifest else folder / MANIFEST_NAME
+    tables = _manifest_table(manifest, key)
+    if not tables:
+        return manifest, []
     if not isinstance(tables, dict) or not all(isinstance(t, dict) for t in tables.values()):
         raise InputError(f"{manifest}: '{key}' must be tables such as [{key}.name] files = [\"glob\", ...]")
     files = sorted(p for p in folder.rglob("*") if p.suffix.lower() in MOTION_SUFFIXES and p.is_file())
@@ -301,12 +314,7 @@ def collect_tempo_bins(folder: Path, manifest: Path | None = None) -> dict[str, 
     """The manifest's ``[tempo_bin_bpm]`` table: genre -> the width of its tempo ranges, where a genre
     spans a wide range of tempi and one style for all would warp most beat pieces (``pop = 20``)."""
     manifest = Path(manifest) if manifest else Path(folder) / MANIFEST_NAME
-    if not manifest.is_file():
-        return {}
-    try:
-        table = tomllib.loads(manifest.read_text()).get("tempo_bin_bpm", {})
-    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{manifest}: not a valid genres manifest ({exc})") from None
+    table = _manifest_table(manifest, "tempo_bin_bpm")
     if not isinstance(table, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
                                               and 5 <= v <= 200 for v in table.values()):
         raise InputError(f"{manifest}: [tempo_bin_bpm] must map genres to widths of 5-200 bpm, e.g. pop = 20")
@@ -646,9 +654,9 @@ def open_database(path: Path | None = None, config: AnalysisConfig = AnalysisCon
     if (path / "database.json").is_file():
         return load_database(path)
     sources = collect_sources(path)
-    rigs, licences, bins = collect_rigs(path), collect_licences(path), collect_tempo_bins(path)
+    options = manifest_options(path)
     h = hashlib.blake2b(repr((FORMAT_VERSION, config)).encode(), digest_size=16)
-    for rig in {id(r): r for r in rigs.values()}.values():
+    for rig in {id(r): r for r in options["rigs"].values()}.values():
         h.update(rig.source.encode())
     if (path / MANIFEST_NAME).is_file():
         h.update((path / MANIFEST_NAME).read_bytes())
@@ -666,7 +674,7 @@ def open_database(path: Path | None = None, config: AnalysisConfig = AnalysisCon
             return load_database(cached)
         except ModelError:
             pass  # a damaged cache entry is rebuilt below
-    db = build_database(sources, config, progress=progress, rigs=rigs, licences=licences, tempo_bins=bins)
+    db = build_database(sources, config, progress=progress, **options)
     db.source = str(path)
     save_database(db, cached)
     return load_database(cached)
