@@ -66,7 +66,7 @@ def main(argv=None) -> int:
         if CC_RIG.is_file():
             targets["Character Creator (bvh)"] = CC_RIG
         for st in styles:
-            if st.name in ("salsa-120-150bpm", "pop-100-124bpm", "mj", "whirl"):   # one per distinct skeleton layout
+            if st.name in ("salsa-133-150bpm", "pop-82-103bpm", "mj", "whirl"):   # one per distinct skeleton layout
                 targets[f"{st.name} skeleton (bvh)"] = style_rig_bvh(tmp, st)
         vrm = _vrm_avatar(tmp)
         if vrm is not None:
@@ -85,7 +85,7 @@ def main(argv=None) -> int:
                 rows.append({"style": st.name, "target": name, "joints": ch.skeleton.n_joints,
                              "retarget_s_per_min": dt / (clip.duration_s / 60), **q})
 
-        long_clip = _tiled(dance(SONG, database=db, style="salsa-120-150bpm", seed=1), 180.0)
+        long_clip = _tiled(dance(SONG, database=db, style="salsa-133-150bpm", seed=1), 180.0)
         timing = {}
         for fmt, ch_name in ((".glb", "mannequin"), (".bvh", "mannequin"), (".vrma", "mannequin")):
             ch = characters[ch_name]

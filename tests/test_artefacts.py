@@ -101,13 +101,14 @@ def _salsa_as_danced(bundled_db, seconds: float = 12.0):
     """A salsa clip played as captured at 30 fps (every 2nd frame of 60), with its flat source frames."""
     from dataclasses import replace
 
-    st = bundled_db.styles["salsa-120-150bpm"]
+    st = bundled_db.styles["salsa-133-150bpm"]
     clips = [st.clip(c) for c in range(st.n_clips)]
     frames = np.arange(0, int(seconds * st.fps), 2)
-    clip = clips[1]
+    c = st.clip_names.index("60_06_scaled")
+    clip = clips[c]
     dance = replace(clip, fps=30.0, local_rot=clip.local_rot[frames], root_pos=clip.root_pos[frames], contacts=None,
                     meta={})
-    return dance, frames + int(st.clip_starts[1]), clips, st.clip_starts
+    return dance, frames + int(st.clip_starts[c]), clips, st.clip_starts
 
 
 def test_a_dance_that_plays_its_source_as_captured_adds_nothing_to_the_feet(bundled_db):

@@ -26,7 +26,7 @@ def tiny_config(tmp_path) -> BenchConfig:
                    mocap_max_clips=1, groundtruth_specs=specs, groundtruth_dir=tmp_path / "groundtruth",
                    trackers=("dp",), structure_songs=(HUNGARIAN,), structure_max_s=30.0,
                    structure_engines=("streaming", "signature", "choreography"), fig12_song=HUNGARIAN, fig12_seeds=1,
-                   fig12_engines=("signature",), recreate_clips=1)
+                   fig12_engines=("signature",), recreate_clips=1, vocabulary_long_songs=1, vocabulary_long_s=30.0)
 
 
 @pytest.fixture(scope="module")
@@ -92,7 +92,8 @@ def test_quality_table_has_every_metric_for_every_dance(bench):
     assert mean["mocap"]["n_transitions"] == 0 and mean["mocap"]["warp_median_abs_log2"] == 0
     for row in ("streaming", "global", "random_walk"):
         assert -1 <= mean[row]["intensity_spearman"] <= 1 and mean[row]["n_transitions"] > 0
-    assert mean["random_walk"]["n_transitions"] > mean["streaming"]["n_transitions"]
+    # (How often each jumps is not compared: the walk's rate is its own parameter, and the search trades jumps
+    # against replaying a move of the last minute.)
 
 
 def test_our_dance_follows_the_music_intensity_better_than_a_random_walk(bench):

@@ -29,7 +29,7 @@ def section(bundled_db):
 def test_rows_and_scores(section):
     s, messages = section
     assert s["rows"] == ["mocap", "frozen", "streaming", "random_walk"]
-    assert s["style"] == "salsa-120-150bpm" and s["dim_g"] == 32 and s["dim_k"] == 3 * len(s["smpl_joints"])
+    assert s["style"] == "salsa-97-124bpm" and s["dim_g"] == 32 and s["dim_k"] == 3 * len(s["smpl_joints"])
     (split,) = s["seeds"]
     assert split["seed"] == 0 and split["held_out"] and split["remaining_clips"] + len(split["held_out"]) == s["clips"]
     assert [x["song"] for x in s["songs"]] == [HUNGARIAN] and 40 < s["songs"][0]["duration_s"] < 50

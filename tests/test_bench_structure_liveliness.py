@@ -114,7 +114,7 @@ def test_neural_realism_scores_against_the_clips_the_model_never_saw(bundled_db,
         # Both "engines" dance a remaining salsa clip: the held-out one must be out of the database.
         names = [n for st in db.styles_of(bs.GENRE) for n in st.clip_names]
         seen.append(names)
-        st = db.styles["salsa-120-150bpm"]
+        st = db.styles["salsa-133-150bpm"]
         return {e: bs.at_fps(st.clip(i), bs.MOCAP_FPS) for i, e in enumerate(engines)}
 
     monkeypatch.setattr(bs, "engine_dances", fake_dances)
@@ -139,7 +139,7 @@ def test_found_motifs_stay_aligned_with_the_plan_when_the_grid_starts_before_the
     from dancesynth.motion.motifs import load_motif_model
 
     model = load_motif_model(bundled_db)
-    clip = bundled_db.styles["salsa-97-116bpm"].clip(0)
+    clip = bundled_db.styles["salsa-97-124bpm"].clip(0)
     beats = clip.meta["beat_frames"][:12] / clip.fps
     found = bs.found_motifs(clip, model, beats)
     extended = bs.found_motifs(clip, model, np.r_[-1.0, -0.5, beats])

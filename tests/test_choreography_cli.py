@@ -26,7 +26,7 @@ def test_choreography_dance_then_eval(tmp_path):
     proc = run("eval", out, SONG, "--report", report, "--json", tmp_path / "eval.json")
     assert proc.returncode == 0, proc.stderr
     scores = json.loads((tmp_path / "eval.json").read_text())
-    assert scores["mocap_style"] == "salsa-120-150bpm"
+    assert scores["mocap_style"] == "salsa-133-150bpm"
     assert scores["dance"]["n_transitions"] == len(json.loads(report.read_text())["transition_times_s"]) > 20
     assert scores["dance"]["hit_rate"] > 0.4                      # measured 0.52 on this song
 

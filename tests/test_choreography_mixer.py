@@ -21,7 +21,7 @@ from dancesynth.motion.database import MotionDatabase
 from dancesynth.motion.motifs import chi2, load_motif_model
 from dancesynth.motion.words import clip_words
 
-STYLE = "salsa-120-150bpm"   # the style the bundled song (130 bpm) is danced in
+STYLE = "salsa-133-150bpm"   # the style the bundled song (130 bpm) is danced in
 
 
 def choreograph(music, db, config, model, **engine_options):

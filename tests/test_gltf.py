@@ -34,7 +34,7 @@ CLIENTS = REPO / "tests" / "clients"
 def salsa(bundled_db, bundled_song):
     from dancesynth.api import dance
 
-    return dance(bundled_song, database=bundled_db, style="salsa-120-150bpm", seed=2)
+    return dance(bundled_song, database=bundled_db, style="salsa-133-150bpm", seed=2)
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,7 @@ from dancesynth.types import MotionClip
 @pytest.fixture(scope="module")
 def swept():
     """A salsa clip whose left hand sweeps through the head's centre, side to side, for a second."""
-    style = open_database().styles["salsa-97-116bpm"]
+    style = open_database().styles["salsa-97-124bpm"]
     clip = style.clip(0)
     sk, fps = clip.skeleton, clip.fps
     roles = find_roles(sk)
@@ -49,7 +49,7 @@ def test_a_hand_swept_through_the_head_is_kept_out_without_a_jump(swept):
 
 
 def test_a_dance_without_hands_near_the_head_is_unchanged():
-    clip = open_database().styles["salsa-97-116bpm"].clip(0)
+    clip = open_database().styles["salsa-97-124bpm"].clip(0)
     roles = find_roles(clip.skeleton)
     g_rot, g_pos = fk(clip.local_rot, clip.root_pos, clip.skeleton.offsets, clip.skeleton.parents)
     centre, _ = head_centre(clip.skeleton, roles.head, g_rot, g_pos)

@@ -99,3 +99,20 @@ def test_sides_with_different_hierarchies_cannot_be_mirrored():
     sk = Skeleton(names, [-1, 0, 0, 1, 1], np.zeros((5, 3)), (("Xrotation",),) * 5)   # rShin hangs off lThigh
     with pytest.raises(InputError, match="same hierarchy"):
         mirror_motion(sk, np.tile([0.0, 0.0, 0.0, 1.0], (2, 5, 1)), np.zeros((2, 3)))
+
+
+def test_the_g1_robot_faces_x_and_is_mirrored_across_its_own_sagittal_plane(bundled_db):
+    """The G1 rig's left and right lie along Z (it faces +X): mirroring reflects Z, not X."""
+    from dancesynth.motion.mirror import lateral_axis
+
+    pop = bundled_db.styles_of("pop")[0]
+    salsa = bundled_db.styles_of("salsa")[0]
+    assert lateral_axis(pop.skeleton) == 2 and lateral_axis(salsa.skeleton) == 0
+    sk, clip = pop.skeleton, pop.clip(0).frames(0, 300)
+    err = symmetry_error(sk)
+    assert err < 0.01, err                     # 6 mm: the robot is built symmetric
+    rot_m, pos_m, _ = mirror_motion(sk, clip.local_rot, clip.root_pos)
+    _, p = fk(clip.local_rot, clip.root_pos, sk.offsets, sk.parents)
+    _, p_m = fk(rot_m, pos_m, sk.offsets, sk.parents)
+    expected = (p * np.array([1.0, 1.0, -1.0]))[:, mirror_pairs(sk)]
+    assert np.linalg.norm(p_m - expected, axis=-1).max() <= _depth(sk.parents) * err + 1e-9

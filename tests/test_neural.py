@@ -21,7 +21,7 @@ from dancesynth.motion.resample import resample_clip_arrays  # noqa: E402
 
 @pytest.fixture(scope="module")
 def style():
-    return open_database().styles["salsa-97-116bpm"]
+    return open_database().styles["salsa-97-124bpm"]
 
 
 @pytest.fixture(scope="module")

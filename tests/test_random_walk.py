@@ -30,7 +30,7 @@ def walk(style, graph, song: MusicFeatures, seed: int, segment_s: float = 5.0):
 
 @pytest.fixture(scope="module")
 def salsa(bundled_db):
-    style = bundled_db.styles["salsa-120-150bpm"]
+    style = bundled_db.styles["salsa-133-150bpm"]
     return style, load_graph(style)[0]
 
 

@@ -30,7 +30,7 @@ def dances(bundled_db, perfume_db, bundled_song):
     from dancesynth.api import dance
 
     out = {s: dance(bundled_song, database=bundled_db, style=s, seed=3)
-           for s in ("salsa-120-150bpm", "mj", "whirl", "pop-100-124bpm")}
+           for s in ("salsa-133-150bpm", "mj", "whirl", "pop-82-103bpm")}
     out["jpop"] = dance(bundled_song, database=perfume_db, style="jpop", seed=3)
     return out
 
@@ -45,10 +45,10 @@ def assert_faithful(source, target, bones):
 
 
 def test_every_bundled_skeleton_maps_its_humanoid_bones_by_name_and_hierarchy(bundled_db):
-    expected = {"salsa-120-150bpm": {"leftUpperArm": "lShldr", "leftShoulder": "lCollar", "spine": "abdomen"},
+    expected = {"salsa-133-150bpm": {"leftUpperArm": "lShldr", "leftShoulder": "lCollar", "spine": "abdomen"},
                 "mj": {"leftUpperArm": "LeftShoulder", "leftShoulder": "LeftCollar", "leftHand": "LeftWrist"},
                 "whirl": {"leftUpperArm": "LeftArm", "leftShoulder": "LeftShoulder", "upperChest": "Spine1"},
-                "pop-100-124bpm": {"leftUpperArm": "leftUpperArm", "leftFoot": "leftFoot", "head": "head"}}
+                "pop-82-103bpm": {"leftUpperArm": "leftUpperArm", "leftFoot": "leftFoot", "head": "head"}}
     for style, want in expected.items():
         sk = bundled_db.styles[style].skeleton
         bones = find_bones(sk)
@@ -70,7 +70,7 @@ def test_a_character_creator_rig_with_twist_helpers_maps_to_its_main_bones():
     assert names["leftToes"] == "CC_Base_L_ToeBase" and names["spine"] == "CC_Base_Waist"
 
 
-@pytest.mark.parametrize("style", ["salsa-120-150bpm", "mj", "whirl", "pop-100-124bpm", "jpop"])
+@pytest.mark.parametrize("style", ["salsa-133-150bpm", "mj", "whirl", "pop-82-103bpm", "jpop"])
 @pytest.mark.parametrize("name", ["mixamo", "smpl", "cmu"])
 def test_every_style_dances_faithfully_on_every_builtin_rig(dances, style, name):
     ch = builtin_character(name)
@@ -82,7 +82,7 @@ def test_every_style_dances_faithfully_on_every_builtin_rig(dances, style, name)
 def test_a_mixamo_named_apose_rig_in_centimetres_dances_with_its_own_names_and_proportions(dances, tmp_path):
     path = apose_mixamo_bvh(tmp_path)
     ch = load_character(path)
-    src = dances["salsa-120-150bpm"]
+    src = dances["salsa-133-150bpm"]
     out = retarget(src, ch)
     assert_faithful(src, out, ch.bones)
     # In the A-pose rest the forearm hangs 40 degrees down; dancing, it points where the source's does.
@@ -105,13 +105,13 @@ def test_dance_cli_writes_the_users_rig_with_its_joint_names_and_offsets(tmp_pat
 
 def test_default_rig_is_the_same_whatever_the_style(tmp_path, bundled_song):
     rigs = set()
-    for style in ("salsa-120-150bpm", "pop-100-124bpm"):
+    for style in ("salsa-133-150bpm", "pop-82-103bpm"):
         out = tmp_path / f"{style}.bvh"
         assert cli(*["dance", TRUMPET, "--style", style, "-o", str(out), "-q"]).returncode == 0
         rigs.add(read_bvh(out).skeleton.names)
     assert rigs == {rig_skeleton("mannequin")[0].names}
     out = tmp_path / "source.bvh"
-    assert cli(*["dance", TRUMPET, "--style", "pop-100-124bpm", "--character", "source", "-o", str(out),
+    assert cli(*["dance", TRUMPET, "--style", "pop-82-103bpm", "--character", "source", "-o", str(out),
                 "-q"]).returncode == 0
     assert read_bvh(out).skeleton.n_joints == 19    # the G1 read as a humanoid, kept on request
 
@@ -190,7 +190,7 @@ def test_fingers_follow_the_source_when_both_rigs_have_them(dances):
     fingers (the mannequin's mitten hands) simply has none to move."""
     if not CC_RIG.is_file():
         pytest.skip(f"{CC_RIG} (shared mocap data) is not on this machine")
-    src = dances["salsa-120-150bpm"]
+    src = dances["salsa-133-150bpm"]
     ch = load_character(CC_RIG)
     out = retarget(src, ch)
     sb = find_bones(src.skeleton)

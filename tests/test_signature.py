@@ -37,13 +37,13 @@ def dances(song, bundled_db):
 
 
 def test_each_step_knows_the_motif_of_the_word_it_dances(bundled_db, model):
-    style = bundled_db.styles["salsa-120-150bpm"]
+    style = bundled_db.styles["salsa-133-150bpm"]
     graph, _ = load_graph(style)
     target = signature_target(style, graph, model)
     words, ids = style_motifs(style, model)
     by_word = {(int(s), int(e)): int(m) for s, e, m in zip(words.start, words.end, ids)}
     has_prev = np.flatnonzero(graph.prev_node >= 0)
-    assert has_prev.size > 1000
+    assert has_prev.size > 800
     for v in has_prev:
         word = (int(graph.node_frame[graph.prev_node[v]]), int(graph.node_frame[v]))
         assert target.node_motif[v] == by_word[word]
@@ -97,7 +97,7 @@ def test_the_signature_converges_as_the_song_goes_on(dances):
 
 def test_every_music_beat_still_shows_a_motion_beat_frame(dances, bundled_db):
     for clip in dances[True]:
-        style = bundled_db.styles[clip.provenance.style]
+        style = bundled_db.styles[clip.provenance.style].material   # what the dance's source frames index
         beat_frames = set(load_graph(style)[0].render_frame.tolist())  # the frames the graph shows on beats
         src = clip.provenance.source_frames
         for t in clip.provenance.music_beat_times_s:

@@ -10,7 +10,7 @@ from dancesynth import rotations as rot
 from dancesynth.engines.graph.cache import load_graph
 from dancesynth.engines.graph.engine import GraphEngine, MusicSegment
 
-STYLE = "salsa-120-150bpm"
+STYLE = "salsa-133-150bpm"
 
 
 @pytest.fixture(scope="module")

@@ -212,9 +212,10 @@ def with_repetition(prov, db: MotionDatabase, music: MusicFeatures, fps: float):
     style = db.styles.get(prov.style)
     if style is None or prov.source_frames is None or not len(prov.source_frames):
         return prov
-    sources = beat_sources(prov.source_frames, fps, music.beat_times_s, style)
-    stats = repetition([(s["clip"], s["source_beat"]) for s in sources], music.beat_times_s)
-    stats["material_minutes"] = style.duration_s / 60.0
+    sources = beat_sources(prov.source_frames, fps, music.beat_times_s, style.material)
+    stats = repetition([(s["clip"], s["source_position"]) for s in sources], music.beat_times_s)
+    stats["material_minutes"] = style.captured_s / 60.0
+    stats["mirrored_minutes"] = style.mirrored_s / 60.0
     return replace(prov, beat_sources=tuple(sources)).with_summary(repetition=stats)
 
 
@@ -313,8 +314,8 @@ def style_reason(asked: str | None, tag: str | None, prefer: tuple, genre: str) 
 
 def _graph_dance_fit(fit: StyleFit, music: MusicFeatures, db: MotionDatabase, config: DanceConfig,
                      timings: dict, progress: Progress | None) -> tuple[MotionClip, EngineRun]:
-    """``_graph_dance`` in one chosen style and metrical level."""
-    style, subdivide = fit.style, fit.subdivide
+    """``_graph_dance`` in one chosen style and metrical level (its ``material``: mirrored takes too)."""
+    style, subdivide = fit.style.material, fit.subdivide
     t = time.perf_counter()
     graph, cached = load_graph(style, config.graph)
     timings["graph_s"] = time.perf_counter() - t

@@ -143,8 +143,9 @@ def styles(database, tempo_map, step):
         tempo = f"{r['tempo_min_bpm']:.0f}-{r['tempo_max_bpm']:.0f}"
         click.echo(f"{r['name']:<{ws}}{r['genre']:<{wg}}{tempo:>12}{r['clips']:>7}{r['minutes']:>9.1f}"
                    f"{r['mirrored_minutes']:>10.1f}{r['beats']:>7}{r['joints']:>8}  {r['licence']}")
-    total = sum(r["minutes"] for r in rows)
-    click.echo(f"{len(rows)} styles, {total:.1f} minutes of captured dance")
+    total, mirrored = sum(r["minutes"] for r in rows), sum(r["mirrored_minutes"] for r in rows)
+    click.echo(f"{len(rows)} styles, {total:.1f} minutes of captured dance"
+               + (f" (and {mirrored:.1f} minutes of its mirrored takes)" if mirrored else ""))
 
 
 def print_tempo_map(database, step: int) -> None:
@@ -152,10 +153,12 @@ def print_tempo_map(database, step: int) -> None:
     from .motion.database import open_database
 
     rows = tempo_map(open_database(database), range(60, 181, step))
-    click.echo(f"tempo  chosen (level, minutes of material)     styles with at least {MIN_MATERIAL_MINUTES:g} min there")
+    click.echo(f"tempo  chosen (level, captured minutes of material)  styles with at least {MIN_MATERIAL_MINUTES:g} "
+               "captured min there (+m: also danced mirrored)")
     for r in rows:
         chosen = f"{r['chosen']} ({r['chosen_level']}, {r['chosen_minutes']:.1f})"
-        others = ", ".join(f"{x['style']} {x['level']} {x['minutes']:.1f}" for x in r["styles"]) or "none"
+        others = ", ".join(f"{x['style']} {x['level']} {x['minutes']:.1f}{'+m' if x['mirrored'] else ''}"
+                           for x in r["styles"]) or "none"
         click.echo(f"{r['tempo_bpm']:>5.0f}  {chosen:<40} {others}")
 
 

@@ -135,7 +135,7 @@ def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
                 clips_by_style[key] = [at_fps(db.styles[key[0]].clip(c), clip.fps)
                                        for c in range(db.styles[key[0]].n_clips)]
                 refs[key] = mocap_reference(clips_by_style[key], clip.fps)
-            st = db.styles[key[0]]
+            st = db.styles[key[0]].material  # the dance's source frames index its material
             if st.name not in sources:
                 sources[st.name] = [st.clip(c) for c in range(st.n_clips)]
             scores[name] = _score(clip, song, refs[key], st, sources[st.name])

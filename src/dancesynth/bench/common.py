@@ -12,7 +12,8 @@ from ..types import MusicFeatures
 
 MUSIC_DIR = Path(__file__).resolve().parents[1] / "data" / "music"
 DEFAULT_SONG = "Kevin_MacLeod_-_Vibe_Ace.ogg"  # the README's demo song
-SECTIONS = ("fig4", "scaling", "pipeline", "quality", "beat_tracking", "structure", "accents", "realism")
+SECTIONS = ("fig4", "scaling", "pipeline", "quality", "beat_tracking", "structure", "accents", "realism",
+            "vocabulary")
 
 Progress = Callable[[str], None]
 
@@ -59,7 +60,7 @@ class BenchConfig:
     fig12_seeds: int = 5
     fig12_step_s: float = 5.0
     fig12_engines: tuple[str, ...] = ("streaming", "signature", "choreography", "neural")
-    recreate_style: str = "salsa-120-150bpm"
+    recreate_style: str = "salsa-133-150bpm"
     recreate_song: str = DEFAULT_SONG
     recreate_clips: int | None = None      # None: every clip of the style in turn
     # 7. Visible accents on the beats (bench.accents): every mocap engine on bundled and generated songs.
@@ -68,7 +69,7 @@ class BenchConfig:
     accent_engines: tuple[str, ...] = ("streaming", "lookahead", "signature", "global", "choreography", "random_walk",
                                        "paper")
     # 8. Realism (bench.realism): FID_k/FID_g/Div_k/Div_g of every mocap engine against mocap held out of a style.
-    realism_style: str | None = None              # None: the largest style
+    realism_style: str | None = "salsa-97-124bpm"  # the salsa style with the most takes (None: the largest)
     realism_songs: tuple[str, ...] | None = None  # bundled songs (None: every one ...)
     realism_min_s: float = 20.0                   # ... at least this long
     realism_max_s: float | None = None
@@ -76,6 +77,10 @@ class BenchConfig:
     realism_fraction: float = 0.2                 # share of the style's clips held out
     realism_window_s: float = 5.0
     realism_engines: tuple[str, ...] = ("streaming", "signature", "global", "choreography", "random_walk")
+    # 9. Vocabulary (bench.vocabulary): minutes per genre, the tempo map, repetition on long songs, guards per style.
+    vocabulary_split: str = "test"        # the long songs reported ("tune": those the constants were chosen on)
+    vocabulary_long_songs: int = 10       # 3-minute generated songs, 4/4 and 3/4
+    vocabulary_long_s: float = 180.0
 
     @classmethod
     def full(cls) -> "BenchConfig":
@@ -88,7 +93,7 @@ class BenchConfig:
                        quality_songs=(DEFAULT_SONG,), quality_max_s=60.0, mocap_max_clips=6,
                        groundtruth_quick=True, structure_songs=(DEFAULT_SONG,), structure_seeds=1, fig12_seeds=2,
                        fig12_song=DEFAULT_SONG, recreate_clips=4, accent_songs=(DEFAULT_SONG,),
-                       realism_songs=(DEFAULT_SONG,), realism_seeds=1)
+                       realism_songs=(DEFAULT_SONG,), realism_seeds=1, vocabulary_long_songs=4)
 
 
 def load_song(name: str, max_s: float | None = None) -> MusicFeatures:

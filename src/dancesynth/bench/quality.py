@@ -48,6 +48,7 @@ def walk_dance(style, music: MusicFeatures, *, subdivide: int = 1, seed: int = 0
     from ..engines.graph.cache import load_graph
     from ..engines.graph.random_walk import OutSteps, RandomWalkEngine
 
+    style = style.material  # the graph the product's engines walk
     graph, _ = load_graph(style)
     grid = beat_grid(music, subdivide=subdivide)
     engine = RandomWalkEngine(style, graph, fps=fps)

@@ -20,7 +20,9 @@ others still run):
 7. ``accents`` -- the dance's visible accents against beats and bars, every mocap
    engine beside chance, a random walk and the raw mocap, with the guards.
 8. ``realism`` -- FID_k, FID_g, Div_k, Div_g of every mocap engine, a frozen pose
-   and the mocap floor against clips held out of the largest style.
+   and the mocap floor against clips held out of the salsa style with the most takes.
+9. ``vocabulary`` -- what the database can dance: minutes per genre, the tempo map,
+   repetition on 3-minute songs, and the guards per style.
 
 ``run_bench`` writes ``bench.json`` into ``out_dir`` and returns the same dict;
 ``format_bench`` turns it into the tables (same layout every run of a mode).
@@ -54,7 +56,8 @@ TITLES = {"fig4": "1. Synthesis time per segment (Xu et al. Fig. 4)",
           "beat_tracking": "5. Beat tracking on generated ground truth",
           "structure": "6. Global structure: motifs and signatures (Aristidou et al.)",
           "accents": "7. Visible accents on beats and bars",
-          "realism": "8. Realism and diversity against held-out mocap (FID_k, FID_g, Div_k, Div_g)"}
+          "realism": "8. Realism and diversity against held-out mocap (FID_k, FID_g, Div_k, Div_g)",
+          "vocabulary": "9. Vocabulary: material per genre and tempo, repetition, guards per style"}
 
 
 def machine_info() -> dict:
@@ -115,7 +118,8 @@ def run_bench(*, quick: bool, out_dir: Path, progress: Progress | None = None,
 
 
 def _run_section(name: str, cfg: BenchConfig, shared: dict, progress, out_dir: Path) -> dict:
-    if name in ("fig4", "scaling", "pipeline", "quality", "structure", "accents", "realism") and "db" not in shared:
+    if name in ("fig4", "scaling", "pipeline", "quality", "structure", "accents", "realism", "vocabulary") \
+            and "db" not in shared:
         from ..motion.database import open_database
 
         shared["db"] = open_database()
@@ -155,6 +159,14 @@ def _run_section(name: str, cfg: BenchConfig, shared: dict, progress, out_dir: P
         from .realism import realism_section
 
         return realism_section(cfg, shared["db"], progress)
+    if name == "vocabulary":
+        import shutil
+
+        from .vocabulary import vocabulary
+
+        if shutil.which("fluidsynth") is None:
+            raise _Skip("fluidsynth is not installed (apt-get install fluidsynth timgm6mb-soundfont)")
+        return vocabulary(cfg, shared["db"], progress)
     if name == "beat_tracking":
         import shutil
 
@@ -258,6 +270,25 @@ TARGETS = {
     # measured before the section existed (benchmarks/results/realism_bench.json: 33.4, salsa-120-150bpm,
     # 3 held-out splits, 4 songs, mocap floor 29.6); quick mode scores one split on one song, a noisier reading.
     "FID_k, streaming vs held-out mocap": ("realism", lambda s: s["mean"]["streaming"]["fid_k"], 34.0),
+    # What the database can dance (issue 30): only shippable data, material at every tempo, no looped clips.
+    "captured minutes of shippable dance (mirrored takes not counted)": (
+        "vocabulary", lambda s: s["totals"]["minutes"], 30.0, "at least"),
+    "styles with at least 2 captured minutes": ("vocabulary", lambda s: s["totals"]["styles_2min"], 4, "at least"),
+    "genres with at least 10 captured minutes": ("vocabulary", lambda s: len(s["totals"]["genres_10min"]), 2,
+                                                 "at least"),
+    "tempi 70-180 bpm without a style of 5 min material": ("vocabulary", lambda s: len(s["tempo_cover"]["short"]), 0),
+    "songs danced from under 2 minutes of material": ("vocabulary", lambda s: s["targets"]["under_2min"], 0),
+    "3-minute songs: beats replaying the last minute, worst song": (
+        "vocabulary", lambda s: s["targets"]["long_replay_max"], 0.10),
+    "accents x chance, every style (mean per style, lower way)": (
+        "vocabulary", lambda s: min(min(g["accent_precision_x_chance"], g["accent_recall_x_chance"])
+                                    for g in s["guards"].values()), 2.5, "at least"),
+    "one-frame joint steps over 30°, every style": (
+        "vocabulary", lambda s: sum(g["one_frame_steps"] for g in s["guards"].values()), 0),
+    "foot speed on the floor / the style's mocap's, every style (mean)": (
+        "vocabulary", lambda s: max(g["foot_skate_vs_mocap"] for g in s["guards"].values()), 1.1),
+    "p99 joint speed / the style's mocap's, every style (mean), distance from 1": (
+        "vocabulary", lambda s: max(abs(g["joint_speed_p99_vs_mocap"] - 1.0) for g in s["guards"].values()), 0.25),
 }
 
 
@@ -290,10 +321,11 @@ def format_bench(result: dict) -> str:
     from .quality import format_quality
     from .speed import format_fig4, format_pipeline, format_scaling
     from .structure import format_structure
+    from .vocabulary import format_vocabulary
 
     formatters = {"fig4": format_fig4, "scaling": format_scaling, "pipeline": format_pipeline,
                   "quality": format_quality, "beat_tracking": format_beat_tracking, "structure": format_structure,
-                  "accents": format_accents, "realism": format_realism}
+                  "accents": format_accents, "realism": format_realism, "vocabulary": format_vocabulary}
     m = result.get("machine", {})
     timings = result.get("timings_s", {})
     out = [f"dancesynth {result.get('dancesynth', '?')} bench ({result.get('mode', '?')}), {result.get('started', '')}",

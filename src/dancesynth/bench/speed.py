@@ -40,7 +40,7 @@ def fig4(cfg: BenchConfig, db, music, progress: Progress | None = None) -> dict:
     from ..engines.graph.cache import load_graph
     from ..engines.graph.engine import GraphEngine
 
-    style = largest_style(db)
+    style = largest_style(db).material  # what the product dances: mirrored takes too
     graph, _ = load_graph(style)
     engine = GraphEngine(style, graph)
     grid = beat_grid(music)
@@ -168,7 +168,8 @@ def replicate(style, times: int):
         local_rot=np.tile(style.local_rot, (times, 1, 1)), root_pos=np.tile(style.root_pos, (times, 1)),
         contacts=np.tile(style.contacts, (times, 1)), energy=np.tile(style.energy, times),
         beat_frames=np.concatenate([style.beat_frames + i * n for i in range(times)]),
-        clip_tempo_bpm=np.tile(style.clip_tempo_bpm, times), fingerprint=f"{style.fingerprint}-x{times}")
+        clip_tempo_bpm=np.tile(style.clip_tempo_bpm, times), fingerprint=f"{style.fingerprint}-x{times}",
+        clip_licences=style.clip_licences * times, mirror=False, n_mirrored=0)
 
 
 def _reset_peak() -> bool:
@@ -205,7 +206,7 @@ def scale_worker(times: int, beat_times_s: list, intensity_db: list, duration_s:
     from ..types import MusicFeatures
 
     music = MusicFeatures(duration_s, np.array(beat_times_s), np.array(intensity_db), 0.0)
-    style = replicate(largest_style(open_database()), times)
+    style = replicate(largest_style(open_database()).material, times)
     out = {"times": times, "base_mb": _peak_mb()}
     exact = _reset_peak()
     t = time.perf_counter()
@@ -342,7 +343,7 @@ def replicated_search(db, music, *, times: int = 10, segment_s: float = 5.0, rep
     from ..engines.graph.cache import load_graph
     from ..engines.graph.engine import GraphEngine
 
-    style = replicate(largest_style(db), times)
+    style = replicate(largest_style(db).material, times)
     if progress:
         progress(f"replicated search: graph of {style.name} (built once, then from the cache)")
     graph, _ = load_graph(style)
@@ -384,7 +385,7 @@ def pipeline(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
         old = os.environ.get("DANCESYNTH_CACHE")
         os.environ["DANCESYNTH_CACHE"] = str(Path(tmp) / "cache")  # a cold cache of its own
         try:
-            for style in sorted(db.styles.values(), key=lambda s: s.name):
+            for style in sorted((s.material for s in db.styles.values()), key=lambda s: s.name):
                 if progress:
                     progress(f"pipeline: graph of {style.name}")
                 t = time.perf_counter()

@@ -240,9 +240,9 @@ class StyleFit:
 
     @property
     def material_minutes(self) -> float:
-        """Captured minutes the song can be danced with at this level: the style's minutes times the
-        expected share of its beat pieces within ``RATE_RANGE``."""
-        return self.style.duration_s / 60.0 * self.share
+        """Captured minutes the song can be danced with at this level: the style's captured minutes times
+        the expected share of its beat pieces within ``RATE_RANGE`` (its mirrored takes not counted)."""
+        return self.style.captured_s / 60.0 * self.share
 
 
 def _fit(style: Style, motion_s: np.ndarray, beat_intervals_s: np.ndarray, subdivide, forced: bool) -> StyleFit:
@@ -359,7 +359,7 @@ def style_fits(db: MotionDatabase, beat_intervals_s, name: str | None = None, *,
 def material_tier(fit: StyleFit) -> int:
     """0: enough material at the song's tempo; 1: a big enough style, but little of it fits the tempo;
     2: a style smaller than ``MIN_MATERIAL_MINUTES`` altogether."""
-    if fit.style.duration_s / 60.0 < MIN_MATERIAL_MINUTES:
+    if fit.style.captured_s / 60.0 < MIN_MATERIAL_MINUTES:
         return 2
     return 0 if fit.material_minutes >= MIN_MATERIAL_MINUTES else 1
 
@@ -429,7 +429,7 @@ def tempo_map(db: MotionDatabase, tempi_bpm, *, levels=LEVELS) -> list[dict]:
         rows.append({"tempo_bpm": float(bpm), "chosen": fits[0].style.name, "chosen_level": fits[0].level,
                      "chosen_minutes": fits[0].material_minutes,
                      "styles": [{"style": f.style.name, "level": f.level, "minutes": f.material_minutes,
-                                 "share": f.share} for f in usable]})
+                                 "share": f.share, "mirrored": f.style.mirror} for f in usable]})
     return rows
 
 

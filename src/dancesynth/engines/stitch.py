@@ -110,6 +110,28 @@ def beat_ease(n: int, bar_position=None, beats_per_bar: int | None = None, *, am
     return out
 
 
+def ease_within(ease, rates, max_rate: float | None, count=None) -> np.ndarray:
+    """Per grid beat, ``ease`` (K+1,) scaled down where the accent timing would play a piece faster than
+    ``max_rate`` times its captured speed. Between beats ``ease`` plays piece k at up to ``peak_k`` times
+    its mean rate (``rates`` (K,), source seconds per music second: the warp that fits it to its beat;
+    ``count`` (K+1,) the music's beat count at each grid beat, None: one beat each), and ``peak_k - 1``
+    grows with the easing, so the easing of both ends of the piece is scaled by ``lambda_k`` to keep
+    ``rate_k * (1 + lambda_k (peak_k - 1)) <= max_rate`` (``lambda_k`` = 0: a piece already warped past
+    ``max_rate`` is played evenly), and each beat takes the smaller scale of the two pieces it joins
+    (the rate stays continuous there). A bar's "1" keeps its extra weight against its neighbours; the
+    easing takes only the speed headroom the pieces have left, and fast songs are not rushed. None: no
+    limit."""
+    ease = np.asarray(ease, dtype=np.float64)
+    if max_rate is None or ease.size < 2:
+        return ease
+    count = np.arange(ease.size, dtype=np.float64) if count is None else np.asarray(count, dtype=np.float64)
+    u = np.linspace(0.0, 1.0, 41)[:, None]
+    peak = ease_rate(u, count[:-1], count[1:], ease[:-1], ease[1:]).max(axis=0)
+    rates = np.maximum(np.asarray(rates, dtype=np.float64), 1e-9)
+    scale = np.clip((max_rate / rates - 1.0) / np.maximum(peak - 1.0, 1e-9), 0.0, 1.0)
+    return ease * np.minimum(np.r_[scale[0], scale], np.r_[scale, scale[-1]])
+
+
 def _timing(u, count0, count1, ease0, ease1):
     """``(ease, ease_rate)`` at ``u``: ``F(u) / F(1)`` and ``span * (1 - a(c) cos 2 pi c) / F(1)``, with
     ``F(u)`` the integral of ``1 - a(c) cos(2 pi c) dc`` from the piece's start, in beats counted from

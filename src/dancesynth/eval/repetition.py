@@ -3,9 +3,11 @@
 A dance made of captured motion shows, on every music beat, some frame of some clip.
 ``beat_sources`` reads which (from the dance's per-frame source positions); ``repetition``
 counts the music beats that replay a *source beat* -- the captured motion beat nearest that
-frame -- already danced within the previous ``window_s`` seconds, and the longest run of
-consecutive music beats that all do (a looped phrase is a long run; a move coming round
-once in a while is not).
+frame, to half a beat (``source_position``: in half time a music beat falls midway between two
+motion beats, which is not a replay of either) -- already danced within the previous
+``window_s`` seconds, and the longest run of consecutive music beats that all do (a looped
+phrase is a long run; a move coming round once in a while is not). A mirrored take is a clip
+of its own: the same move on the other side is not counted as a replay.
 """
 
 from __future__ import annotations
@@ -16,9 +18,11 @@ WINDOW_S = 60.0
 
 
 def beat_sources(source_frames, fps: float, beat_times_s, style) -> list[dict]:
-    """Per music beat: ``{"clip", "file", "frame", "source_beat"}`` -- the style's clip danced at that beat,
-    its source file, the frame within the clip (at the style's frame rate) and the index of the
-    style's nearest motion beat. ``source_frames``: the style's flat frame each dance frame shows."""
+    """Per music beat: ``{"clip", "file", "frame", "source_beat", "source_position"}`` -- the style's clip
+    danced at that beat, its source file, the frame within the clip (at the style's frame rate), the
+    index of the style's nearest motion beat and the frame's place among the style's motion beats
+    to half a beat (3.5: midway between beats 3 and 4). ``source_frames``: the style's flat frame
+    each dance frame shows."""
     src = np.asarray(source_frames, dtype=np.float64)
     times = np.asarray(beat_times_s, dtype=np.float64)
     if src.size == 0 or times.size == 0:
@@ -30,8 +34,13 @@ def beat_sources(source_frames, fps: float, beat_times_s, style) -> list[dict]:
     nearest = np.clip(np.searchsorted(beats, flat), 1, max(len(beats) - 1, 1)) if beats.size > 1 else np.zeros_like(flat)
     if beats.size > 1:
         nearest = np.where(np.abs(beats[nearest - 1] - flat) <= np.abs(beats[nearest] - flat), nearest - 1, nearest)
+    position = nearest.astype(np.float64)
+    if beats.size > 1:  # the fractional place between the motion beats around the frame, in halves
+        i = np.clip(np.searchsorted(beats, flat, side="right") - 1, 0, len(beats) - 2)
+        phase = np.clip((flat - beats[i]) / np.maximum(beats[i + 1] - beats[i], 1), 0.0, 1.0)
+        position = np.round(2.0 * (i + phase)) / 2.0
     return [{"clip": style.clip_names[c], "file": style.clip_sources[c], "frame": int(f - style.clip_starts[c]),
-             "source_beat": int(b)} for c, f, b in zip(clip, flat, nearest)]
+             "source_beat": int(b), "source_position": float(p)} for c, f, b, p in zip(clip, flat, nearest, position)]
 
 
 def repetition(source_beats, beat_times_s, *, window_s: float = WINDOW_S) -> dict:

@@ -172,6 +172,7 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
                 if beats.size == 0:
                     break
                 style, _ = choose_style(db, tempo if tempo > 0 else FALLBACK_BPM, config.style)
+                style = style.material
                 graph, _ = load_graph(style)
                 worker = _Worker(GraphEngine(style, graph, config.render, fps=config.fps,
                                              signature=_signature(config, db, style, graph)),

@@ -29,14 +29,17 @@ def list_styles(database=None) -> list[dict]:
 
         database = open_database(folder)
     return sorted((_row(s.name, s.genre, s.clip_tempo_bpm, s.n_clips, s.n_frames, s.fps, len(s.beat_frames),
-                        s.skeleton.n_joints, s.licences) for s in database.styles.values()), key=lambda r: r["name"])
+                        s.skeleton.n_joints, s.licences, s.mirror) for s in database.styles.values()),
+                  key=lambda r: r["name"])
 
 
-def _row(name, genre, tempi, clips, frames, fps, beats, joints, licences) -> dict:
-    """A listing row. ``minutes`` is captured motion; mirrored takes (none yet) would be counted apart."""
+def _row(name, genre, tempi, clips, frames, fps, beats, joints, licences, mirror) -> dict:
+    """A listing row. ``minutes`` is captured motion; ``mirrored_minutes`` the mirrored takes the style is
+    also danced with (``Style.material``), counted apart."""
+    minutes = frames / fps / 60.0
     return {"name": name, "genre": genre, "tempo_min_bpm": float(min(tempi)), "tempo_max_bpm": float(max(tempi)),
-            "clips": int(clips), "minutes": frames / fps / 60.0, "mirrored_minutes": 0.0, "beats": int(beats),
-            "joints": int(joints), "fps": float(fps), "licence": ", ".join(licences)}
+            "clips": int(clips), "minutes": minutes, "mirrored_minutes": minutes if mirror else 0.0,
+            "beats": int(beats), "joints": int(joints), "fps": float(fps), "licence": ", ".join(licences)}
 
 
 def _stored_rows(folder: Path) -> list[dict]:
@@ -59,7 +62,7 @@ def _stored_rows(folder: Path) -> list[dict]:
             licences = meta.get("licences") or [""] * len(tempi)
             rows.append(_row(name, str(meta["genre"]), tempi, len(tempi), int(starts[-1]), float(meta["fps"]),
                              len(beats), len(meta["skeleton"]["names"]),
-                             tuple(dict.fromkeys(str(x) or "unrecorded" for x in licences))))
+                             tuple(dict.fromkeys(str(x) or "unrecorded" for x in licences)), meta.get("mirror") is True))
     except FileNotFoundError as exc:
         raise InputError(f"{folder}: {exc.filename} is missing; rebuild the database") from None
     except (OSError, ValueError, KeyError, TypeError, AttributeError, EOFError, zipfile.BadZipFile,

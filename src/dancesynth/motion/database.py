@@ -21,6 +21,7 @@ import tomllib
 import zipfile
 import zlib
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Callable, Iterable
 
@@ -73,6 +74,8 @@ class Style:
     clip_tempo_bpm: np.ndarray   # (C,)
     fingerprint: str = ""
     clip_licences: tuple[str, ...] = ()   # per clip, from the manifest's [licences] ("" where none is recorded)
+    mirror: bool = False         # dance it with each take's mirror image too (``material``; manifest [mirror])
+    n_mirrored: int = 0          # the last n_mirrored clips are mirrored takes of the first ones (``material``)
 
     @property
     def licences(self) -> tuple[str, ...]:
@@ -90,6 +93,38 @@ class Style:
     @property
     def duration_s(self) -> float:
         return self.n_frames / self.fps
+
+    @property
+    def captured_s(self) -> float:
+        """Seconds of captured motion (mirrored takes not counted)."""
+        return float(self.clip_starts[self.n_clips - self.n_mirrored]) / self.fps
+
+    @property
+    def mirrored_s(self) -> float:
+        """Seconds of mirrored takes the style is danced with (``material``)."""
+        return self.captured_s if self.mirror else 0.0
+
+    @cached_property
+    def material(self) -> "Style":
+        """What the engines dance: the captured clips and, for a style marked ``mirror``, each one's
+        left-right mirror image after them (``motion.mirror``: contacts swapped, the same motion
+        beats, energies and tempi), named '<clip> (mirrored)'. Analyses and held-out evaluations
+        read the style itself, whose clips are all captured."""
+        if not self.mirror or self.n_mirrored:
+            return self
+        from .mirror import mirror_motion
+
+        rot, pos, contacts = mirror_motion(self.skeleton, self.local_rot, self.root_pos, self.contacts)
+        n = self.n_frames
+        return Style(self.name, self.genre, self.skeleton, self.fps,
+                     self.clip_names + tuple(f"{c} (mirrored)" for c in self.clip_names),
+                     self.clip_sources * 2, np.r_[self.clip_starts, self.clip_starts[1:] + n],
+                     np.concatenate([self.local_rot, rot.astype(np.float32)]),
+                     np.concatenate([self.root_pos, pos.astype(np.float32)]),
+                     np.concatenate([self.contacts, contacts]), np.r_[self.energy, self.energy],
+                     np.r_[self.beat_frames, self.beat_frames + n], np.r_[self.clip_tempo_bpm, self.clip_tempo_bpm],
+                     f"{self.fingerprint}+mirrored", self.clip_licences * 2 if self.clip_licences else (),
+                     mirror=True, n_mirrored=self.n_clips)
 
     @property
     def tempo_range_bpm(self) -> tuple[float, float]:
@@ -112,7 +147,10 @@ class Style:
                                 "style": self.name, "beat_frames": beats})
 
     def without_clip(self, index: int) -> "Style":
-        """The style with clip ``index`` left out (held-out evaluations: re-create a dance not in the style)."""
+        """The style with clip ``index`` left out (held-out evaluations: re-create a dance not in the style);
+        its mirror image goes with it (the style keeps ``mirror``: its ``material`` mirrors the clips left)."""
+        if self.n_mirrored:
+            raise ValueError("leave clips out of the style, not of its material")
         a, b = int(self.clip_starts[index]), int(self.clip_starts[index + 1])
         keep = np.r_[0:a, b:self.n_frames]
         beats = self.beat_frames[(self.beat_frames < a) | (self.beat_frames >= b)]
@@ -123,7 +161,7 @@ class Style:
                      self.local_rot[keep], self.root_pos[keep], self.contacts[keep], self.energy[keep],
                      np.where(beats >= b, beats - (b - a), beats), np.delete(self.clip_tempo_bpm, index),
                      f"{self.fingerprint}-without-{index}",
-                     self.clip_licences[:index] + self.clip_licences[index + 1:])
+                     self.clip_licences[:index] + self.clip_licences[index + 1:], mirror=self.mirror)
 
 
 @dataclass(eq=False)
@@ -264,7 +302,7 @@ def _manifest_table(manifest: Path, key: str) -> dict:
 def manifest_options(folder: Path, manifest: Path | None = None) -> dict:
     """What a manifest says beyond the genres, as ``build_database``'s keyword arguments."""
     return {"rigs": collect_rigs(folder, manifest), "licences": collect_licences(folder, manifest),
-            "tempo_bins": collect_tempo_bins(folder, manifest)}
+            "tempo_bins": collect_tempo_bins(folder, manifest), "mirror": collect_mirrored(folder, manifest)}
 
 
 def _manifest_tables(folder: Path, manifest: Path | None, key: str) -> tuple[Path, list[tuple[str, dict, list[Path]]]]:
@@ -321,6 +359,20 @@ def collect_tempo_bins(folder: Path, manifest: Path | None = None) -> dict[str, 
     return {str(k): float(v) for k, v in table.items()}
 
 
+def collect_mirrored(folder: Path, manifest: Path | None = None) -> tuple[str, ...]:
+    """The manifest's ``[mirror]`` table: the genres danced with mirrored takes too (``Style.material``)::
+
+        [mirror]
+        genres = ["salsa", "pop"]
+    """
+    manifest = Path(manifest) if manifest else Path(folder) / MANIFEST_NAME
+    table = _manifest_table(manifest, "mirror")
+    genres = table.get("genres", []) if isinstance(table, dict) else None
+    if not isinstance(genres, list) or not all(isinstance(g, str) for g in genres):
+        raise InputError(f"{manifest}: [mirror] needs genres = [\"genre\", ...]")
+    return tuple(genres)
+
+
 def collect_licences(folder: Path, manifest: Path | None = None) -> dict[Path, tuple[str, str]]:
     """The manifest's ``[licences.NAME]`` tables: BVH file -> (licence, credit line)::
 
@@ -365,10 +417,12 @@ def _leg_length(skeleton: Skeleton) -> float:
 def build_database(sources: Iterable[tuple[str, Path]], config: AnalysisConfig = AnalysisConfig(),
                    *, progress: Callable[[str], None] | None = None, rigs: dict[Path, Rig] | None = None,
                    licences: dict[Path, tuple[str, str]] | None = None,
-                   tempo_bins: dict[str, float] | None = None) -> MotionDatabase:
+                   tempo_bins: dict[str, float] | None = None, mirror: Iterable[str] = ()) -> MotionDatabase:
     """Read, analyse and group BVH clips into styles (``rigs``: how to read some of them, ``collect_rigs``;
     ``licences``: each file's licence, ``collect_licences``; ``tempo_bins``: a genre's own tempo-range
-    width, ``collect_tempo_bins``)."""
+    width, ``collect_tempo_bins``; ``mirror``: the genres danced with mirrored takes too,
+    ``collect_mirrored``)."""
+    mirror = set(mirror)
     groups: dict[tuple, list] = {}
     for genre, path in sources:
         if progress:
@@ -405,10 +459,31 @@ def build_database(sources: Iterable[tuple[str, Path]], config: AnalysisConfig =
         width = (tempo_bins or {}).get(genre, config.tempo_bin_bpm)
         for name, part in _split_by_tempo(base, analysed, width, config.min_style_minutes).items():
             styles[name] = _style_from(name, genre, canon, fps, part)
+            if genre in mirror:
+                styles[name].mirror = _check_mirrorable(styles[name])
     if not styles:
         raise InputError(f"no clip had at least {config.min_beats_per_clip} motion beats: the database "
                          "needs dance clips several seconds long")
     return MotionDatabase(styles)
+
+
+#: A skeleton whose paired bones differ by more than this share of its leg length is too lopsided to
+#: mirror (the mirrored take's feet would not meet the floor where the original's did).
+MIRROR_TOLERANCE = 0.05
+
+
+def _check_mirrorable(style: Style) -> bool:
+    from .mirror import mirror_pairs, symmetry_error
+
+    sk = style.skeleton
+    if np.all(mirror_pairs(sk) == np.arange(sk.n_joints)):
+        raise InputError(f"style '{style.name}' cannot be mirrored: its joint names have no left/right pairs; "
+                         "leave its genre out of the manifest's [mirror] table")
+    err, leg = symmetry_error(sk), _leg_length(sk)
+    if err > MIRROR_TOLERANCE * leg:
+        raise InputError(f"style '{style.name}' cannot be mirrored: its left and right bones differ by up to "
+                         f"{err:.3g} (leg length {leg:.3g}); leave its genre out of the manifest's [mirror] table")
+    return True
 
 
 def _consistent_metre(analysed: list, config: AnalysisConfig) -> list:
@@ -437,10 +512,14 @@ def _consistent_metre(analysed: list, config: AnalysisConfig) -> list:
 
 
 def _split_by_tempo(base: str, analysed: list, width: float, min_minutes: float) -> dict[str, list]:
-    """Split a genre into tempo ranges of fixed width (§3.2), merging ranges too small to dance on."""
+    """Split a genre into tempo ranges of fixed width (§3.2), merging ranges too small to dance on.
+
+    The ranges' edges sit in the widest gaps between the clips' tempi (``_range_origin``): an edge
+    through a cluster of takes at one tempo (seven G1 routines at 100-103 bpm, on an edge at 100)
+    would part takes that dance alike and leave both halves short of material at that tempo."""
     tempi = np.array([a.tempo_bpm for _, a in analysed])
     minutes = np.array([c.n_frames / c.fps / 60.0 for c, _ in analysed])
-    bins = np.floor(tempi / width).astype(int)
+    bins = np.floor((tempi - _range_origin(tempi, width)) / width).astype(int)
     while len(set(bins)) > 1:
         labels = sorted(set(bins))
         size = {b: minutes[bins == b].sum() for b in labels}
@@ -454,6 +533,16 @@ def _split_by_tempo(base: str, analysed: list, width: float, min_minutes: float)
     if len(groups) == 1:
         return {base: analysed}
     return {f"{base}-{tempi[bins == b].min():.0f}-{tempi[bins == b].max():.0f}bpm": g for b, g in groups.items()}
+
+
+def _range_origin(tempi: np.ndarray, width: float) -> float:
+    """Where the tempo ranges start (mod ``width``): the origin, in 0.5 bpm steps, whose range edges are
+    farthest from every clip's tempo, the fewest ranges first, then the lowest origin (0 on ties, the
+    plain multiples of the width)."""
+    origins = np.arange(0.0, width, 0.5)
+    edge_gap = np.array([np.min(np.abs((tempi - o + width / 2) % width - width / 2)) for o in origins])
+    count = np.array([len(np.unique(np.floor((tempi - o) / width))) for o in origins])
+    return float(origins[np.lexsort((origins, -edge_gap, count))[0]])
 
 
 def _style_from(name, genre, skeleton, fps, analysed) -> Style:
@@ -536,7 +625,14 @@ def _style_from_stored(name: str, meta: dict, arr: dict, fingerprint: str) -> St
     return Style(name=name, genre=str(meta["genre"]), skeleton=sk, fps=fps, clip_names=clips, clip_sources=sources,
                  clip_starts=starts, local_rot=rot, root_pos=root_pos, contacts=arr["contacts"].astype(bool),
                  energy=arr["energy"], beat_frames=beats, clip_tempo_bpm=arr["clip_tempo_bpm"],
-                 fingerprint=fingerprint, clip_licences=_licences(meta, len(clips)))
+                 fingerprint=fingerprint, clip_licences=_licences(meta, len(clips)), mirror=_flag(meta, "mirror"))
+
+
+def _flag(meta: dict, key: str) -> bool:
+    value = meta.get(key, False)
+    if not isinstance(value, bool):
+        raise ValueError(f"'{key}' must be true or false")
+    return value
 
 
 def _licences(meta: dict, n_clips: int) -> tuple[str, ...]:
@@ -569,7 +665,8 @@ def _save_database(db: MotionDatabase, folder: Path) -> None:
                 clip_tempo_bpm=st.clip_tempo_bpm)
         index["styles"][name] = {
             "genre": st.genre, "fps": st.fps, "skeleton": _skeleton_to_json(st.skeleton),
-            "clips": list(st.clip_names), "sources": list(st.clip_sources), "licences": list(st.clip_licences)}
+            "clips": list(st.clip_names), "sources": list(st.clip_sources), "licences": list(st.clip_licences),
+            **({"mirror": True} if st.mirror else {})}
     with open(folder / "database.json", "w") as fh:
         json.dump(index, fh, indent=1)
 

@@ -1,12 +1,15 @@
-"""Left-right mirroring of motion, to augment the training data of the neural pose generator.
+"""Left-right mirroring of motion: mirrored takes in the database, and data augmentation for the
+neural pose generator.
 
-A motion is reflected across the character's sagittal plane: world X -> -X (Y is up and
-characters face +Z). With the reflection M = diag(-1, 1, 1) a rotation R becomes M R M,
-the quaternion (x, y, z, w) -> (x, -y, -z, w); each joint takes the reflected local rotation
-of its left/right counterpart (``mirror_pairs``), the root's X is negated and the (left, right)
-foot contacts swap. The result is exact when the skeleton is mirror-symmetric (the offset of
-a joint's counterpart is its reflected offset); ``symmetry_error`` says how far a skeleton is
-from that, so a caller can decide whether mirroring its motion is valid.
+A motion is reflected across the character's sagittal plane: the world axis its left and right
+sides lie along (``lateral_axis``: X for a character facing +Z, as most rigs; Z for the G1 robot,
+which faces +X) changes sign. With that reflection M a rotation R becomes M R M; for the
+quaternion (v, w) that is (-M v, w), e.g. (x, -y, -z, w) across X. Each joint takes the reflected
+local rotation of its left/right counterpart (``mirror_pairs``), the root's position is reflected
+and the (left, right) foot contacts swap. The result is exact when the skeleton is
+mirror-symmetric (the offset of a joint's counterpart is its reflected offset);
+``symmetry_error`` says how far a skeleton is from that, so a caller can decide whether
+mirroring its motion is valid.
 """
 
 from __future__ import annotations
@@ -17,8 +20,20 @@ from ..errors import InputError
 from ..types import Skeleton
 from .roles import _side_and_part
 
-_REFLECT_VEC = np.array([-1.0, 1.0, 1.0])
-_REFLECT_QUAT = np.array([1.0, -1.0, -1.0, 1.0])
+
+def lateral_axis(skeleton: Skeleton) -> int:
+    """The rest pose's left-right axis (0 = X, 1 = Y, 2 = Z): the one along which the paired joints'
+    offsets differ most (the hips and shoulders stand apart sideways)."""
+    pairs = mirror_pairs(skeleton)
+    spread = np.abs(skeleton.offsets - skeleton.offsets[pairs]).sum(axis=0)
+    return int(np.argmax(spread)) if spread.any() else 0
+
+
+def _reflection(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
+    """The reflection of positions (3,) and of quaternions (4,) across the skeleton's sagittal plane."""
+    vec = np.ones(3)
+    vec[lateral_axis(skeleton)] = -1.0
+    return vec, np.r_[-vec, 1.0]
 
 
 def mirror_pairs(skeleton: Skeleton) -> np.ndarray:
@@ -50,7 +65,7 @@ def symmetry_error(skeleton: Skeleton) -> float:
     """
     pairs = mirror_pairs(skeleton)
     off = skeleton.offsets
-    err = np.linalg.norm(off[pairs] - off * _REFLECT_VEC, axis=-1)[skeleton.parents >= 0]
+    err = np.linalg.norm(off[pairs] - off * _reflection(skeleton)[0], axis=-1)[skeleton.parents >= 0]
     return float(err.max()) if err.size else 0.0
 
 
@@ -78,7 +93,8 @@ def mirror_motion(skeleton: Skeleton, local_rot, root_pos, contacts=None):
     local_rot = np.asarray(local_rot, dtype=np.float64)
     if local_rot.shape[-2:] != (skeleton.n_joints, 4):
         raise InputError(f"local_rot must be (..., {skeleton.n_joints}, 4), got {local_rot.shape}")
-    local_rot_m = local_rot[..., pairs, :] * _REFLECT_QUAT
-    root_pos_m = np.asarray(root_pos, dtype=np.float64) * _REFLECT_VEC
+    vec, quat = _reflection(skeleton)
+    local_rot_m = local_rot[..., pairs, :] * quat
+    root_pos_m = np.asarray(root_pos, dtype=np.float64) * vec
     contacts_m = None if contacts is None else np.asarray(contacts)[..., ::-1].copy()
     return local_rot_m, root_pos_m, contacts_m

@@ -30,7 +30,7 @@ from ...motion.motifs import style_motifs
 from ...motion.roles import find_roles
 from ...motion.words import MotionWords
 from ..footlock import FootLockState, lock_feet
-from ..stitch import Pieces, StitchState, beat_ease, render
+from ..stitch import Pieces, StitchState, beat_ease, ease_within, render
 
 
 @dataclass(frozen=True)
@@ -59,6 +59,7 @@ class MixerConfig:
     accent: AccentCosts | None = AccentCosts()  # prefer words that stop on their beats and not between
     ease_beats: float = 0.3        # accent timing on each music beat (engines.stitch.ease; 0 = off)
     ease_downbeat: float = 0.3     # ... and this much harder on each bar's first beat
+    ease_max_rate: float | None = 1.5  # ... never faster between beats than this times the captured speed
 
 
 @dataclass(frozen=True)
@@ -273,8 +274,9 @@ def mix(style: Style, bank: WordBank, motifs: np.ndarray, beat_times_s: np.ndarr
         f0, f1 = (accents.frame[np.searchsorted(style.beat_frames, f)] for f in (f0, f1))
     f0, f1 = f0.astype(np.float64), f1.astype(np.float64)
     count = np.arange(len(times), dtype=np.float64) if beat_count is None else np.asarray(beat_count, float)
-    ease = beat_ease(len(times), bar_position, beats_per_bar, amount=config.ease_beats,
-                     downbeat=config.ease_downbeat)
+    ease = ease_within(beat_ease(len(times), bar_position, beats_per_bar, amount=config.ease_beats,
+                                 downbeat=config.ease_downbeat), (f1 - f0) / style.fps / np.diff(times),
+                       config.ease_max_rate, count)
     pieces = Pieces(times[:-1], times[1:], f0, f1, jump, count[:-1], count[1:], ease[:-1], ease[1:])
     _, frames = render(style, pieces, StitchState(), fps=fps, end_s=end_s, blend_s=config.blend_s,
                        inclusive_end=True)

@@ -27,7 +27,7 @@ from ...motion.database import Style
 from ...motion.roles import JointRoles, find_roles
 from ...types import DEFAULT_FPS
 from ..footlock import FootLockState, lock_feet
-from ..stitch import Pieces, Rendered, StitchState, beat_ease, render
+from ..stitch import Pieces, Rendered, StitchState, beat_ease, ease_within, render
 from .meta_graph import MetaMotionGraph
 from .search import AccentCosts, Path, StepCosts, search
 from .signature import DEFAULT_WEIGHT, SignatureTarget
@@ -66,20 +66,25 @@ class MusicSegment:
 @dataclass(frozen=True)
 class EngineConfig:
     blend_s: float = 0.3              # inertialization time at a jump
-    repeat_penalty: float = 0.5       # cost of revisiting a recently danced beat (0 = paper)
-    repeat_half_life_beats: float = 32.0
+    repeat_penalty: float = 8.0       # cost of arriving at a beat danced within repeat_window_s (0 = paper): about
+                                      # one z unit of intensity mismatch (intensity_weight), so a fresh beat as
+                                      # good as a replayed one wins (tuned on the tuning songs, docs/vocabulary.md)
+    repeat_window_s: float = 60.0     # ... what a viewer remembers: eval.repetition counts replays within it
     foot_lock: bool = True            # hold planted feet still through blends (leg IK)
-    jump_cost: float = 0.25           # added to every jump (0 = paper): fewer, better-motivated jumps
+    jump_cost: float = 1.0            # added to every jump (0 = paper): fewer, better-motivated jumps (each jump's
+                                      # blend slides the feet; 0.25 before the larger database)
     signature_weight: float = DEFAULT_WEIGHT  # cost scale of a motif not owed, when following a signature
     # prefer pieces that stop on their beats and keep their feet (None = paper); the warp costs scale
     # with intensity_weight
-    accent: AccentCosts | None = AccentCosts(warp=16.0, far_warp=30.0, slide=1.0)
+    accent: AccentCosts | None = AccentCosts(warp=16.0, far_warp=30.0, slide=3.0)
     bar_accent: float = 0.5           # ask for this much more intensity (z units) on each bar's first beat,
                                       # less on the others: the big moves start on the "1" (0 = paper)
     downbeat_stop: float = 0.5        # on a bar's first beat, a stop of strength s costs s x this less
     ease_beats: float = 0.3           # accent timing: play slower on each music beat, faster between
                                       # (stitch.ease; 0 = the paper's constant rate per piece)
     ease_downbeat: float = 0.45       # ... and this much harder on each bar's first beat
+    ease_max_rate: float | None = 1.5  # ... but never faster between beats than this times the captured speed
+                                       # (stitch.ease_within; None = no limit)
     intensity_weight: float = 8.0     # eq. (8)'s intensity match against the stop, jump and repeat costs
                                       # beyond the paper (1 = the weight they were tuned at)
 
@@ -102,7 +107,7 @@ class StreamState:
     mean_db: float = 0.0
     m2_db: float = 0.0
     start_nodes: np.ndarray | None = None  # InitS, or the one start a seed picked
-    recent: np.ndarray | None = None       # (N,) decayed visit counts, for repeat_penalty
+    last_seen_s: np.ndarray | None = None  # (N,) when each node was last danced (-inf: never), for repeat_penalty
     stitch: StitchState = field(default_factory=StitchState)
     feet: FootLockState = field(default_factory=FootLockState)
     segments: int = 0
@@ -155,10 +160,14 @@ def standardise(values: np.ndarray, mean: float, std: float) -> np.ndarray:
 
 
 def pieces_from_path(graph: MetaMotionGraph, path: Path, beat_times_s: np.ndarray,
-                     beat_count: np.ndarray | None = None, ease: np.ndarray | None = None) -> Pieces:
-    """The path's beat pieces; ``beat_count`` and ``ease`` (K+1,) per beat as in ``Pieces``."""
+                     beat_count: np.ndarray | None = None, ease: np.ndarray | None = None,
+                     ease_max_rate: float | None = None) -> Pieces:
+    """The path's beat pieces; ``beat_count`` and ``ease`` (K+1,) per beat as in ``Pieces``, the easing
+    kept within ``ease_max_rate`` times the captured speed (``stitch.ease_within``)."""
     f0 = graph.render_frame[path.via].astype(np.float64)
     f1 = graph.render_frame[path.nodes[1:]].astype(np.float64)
+    if ease is not None:
+        ease = ease_within(ease, (f1 - f0) / graph.fps / np.diff(beat_times_s), ease_max_rate, beat_count)
     count = None if beat_count is None else np.asarray(beat_count, dtype=np.float64)
     return Pieces(beat_times_s[:-1].astype(float), beat_times_s[1:].astype(float), f0, f1, path.jump.copy(),
                   None if count is None else count[:-1], None if count is None else count[1:],
@@ -201,8 +210,10 @@ class GraphEngine:
         else:
             start = np.array([state.node])
         thc = np.inf if segment.remaining_beats is None else float(segment.remaining_beats - segment.ahead)
-        recent = state.recent if state.recent is not None else np.zeros(self.graph.n_nodes)
-        penalty = self.config.repeat_penalty * recent if self.config.repeat_penalty > 0 else None
+        seen = state.last_seen_s if state.last_seen_s is not None else np.full(self.graph.n_nodes, -np.inf)
+        penalty = None
+        if self.config.repeat_penalty > 0:
+            penalty = self.config.repeat_penalty * (beats[0] - seen <= self.config.repeat_window_s)
         counts = state.motif_counts
         if self.signature is not None:
             counts = np.zeros(len(self.signature.template)) if counts is None else counts
@@ -219,12 +230,12 @@ class GraphEngine:
                       **self._beat_costs(bars, segment.music_beat)).first(k)
         beats, bars = beats[:k + 1], None if bars is None else bars[:k + 1]
         count = None if segment.beat_count is None else segment.beat_count[:k + 1]
-        decay = 0.5 ** (1.0 / self.config.repeat_half_life_beats)
-        recent = recent * decay ** k
-        np.add.at(recent, path.nodes[1:], decay ** np.arange(k - 1, -1, -1))
+        seen = seen.copy()
+        seen[path.nodes[1:]] = beats[1:]
         t1 = time.perf_counter()
         pieces = pieces_from_path(self.graph, path, beats, count,
-                                  self.config.beat_ease(len(beats), bars, segment.beats_per_bar))
+                                  self.config.beat_ease(len(beats), bars, segment.beats_per_bar),
+                                  self.config.ease_max_rate)
         last = segment.end_s is not None
         stitch, frames = render(
             self.style, pieces, state.stitch, fps=self.fps, end_s=segment.end_s if last else float(beats[-1]),
@@ -234,7 +245,7 @@ class GraphEngine:
         t3 = time.perf_counter()
         new_state = replace(state, node=int(path.nodes[-1]), prev_duration_s=float(beats[-1] - beats[-2]),
                             n_heard=n, mean_db=mean, m2_db=m2, stitch=stitch, segments=state.segments + 1,
-                            recent=recent, feet=feet,
+                            last_seen_s=seen, feet=feet,
                             motif_counts=None if counts is None else self.signature.count(counts, path.nodes[1:]))
         return new_state, SegmentFrames.of(frames, local, path, pieces, t1 - t0, time.perf_counter() - t1,
                                            self.signature, foot_lock_s=t3 - t2)
@@ -259,7 +270,8 @@ class GraphEngine:
                       **self._beat_costs(bar_position, music_beat))
         t1 = time.perf_counter()
         pieces = pieces_from_path(self.graph, path, np.asarray(beat_times_s, dtype=np.float64), beat_count,
-                                  self.config.beat_ease(len(beat_times_s), bar_position, beats_per_bar))
+                                  self.config.beat_ease(len(beat_times_s), bar_position, beats_per_bar),
+                                  self.config.ease_max_rate)
         _, frames = render(self.style, pieces, state.stitch, fps=self.fps, end_s=end_s, blend_s=self.config.blend_s,
                            inclusive_end=True, roles=self.roles)
         t2 = time.perf_counter()

@@ -126,7 +126,7 @@ class RandomWalkEngine:
         path, restarts = random_walk(self.graph, len(beats) - 1, rng, start=state.node, out=self._out)
         t1 = time.perf_counter()
         ease = self.config.beat_ease(len(beats), segment.bar_position, segment.beats_per_bar)
-        pieces = pieces_from_path(self.graph, path, beats, segment.beat_count, ease)
+        pieces = pieces_from_path(self.graph, path, beats, segment.beat_count, ease, self.config.ease_max_rate)
         last = segment.end_s is not None
         stitch, frames = render(self.style, pieces, state.stitch, fps=self.fps,
                                 end_s=segment.end_s if last else float(beats[-1]),
