@@ -199,9 +199,9 @@ def test_build_db_writes_a_database_that_dance_can_use(tmp_path, out):
     proc = run("build-db", REPO / "tests" / "data" / "mocap", "-o", db)
     assert proc.returncode == 0, proc.stderr
     assert (db / "database.json").is_file()
-    proc = run("dance", TRUMPET, "-o", out, "--database", db, "--style", "perfume_mit")
+    proc = run("dance", TRUMPET, "-o", out, "--database", db, "--style", "cmu_daz_salsa")
     assert proc.returncode == 0, proc.stderr
-    assert "perfume_mit" in proc.stdout and out.exists()
+    assert "cmu_daz_salsa" in proc.stdout and out.exists()
 
 
 @pytest.mark.parametrize("args, words", [

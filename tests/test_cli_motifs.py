@@ -10,7 +10,7 @@ import pytest
 
 from test_cli import assert_clean_failure, cli, run
 
-JPOP_EXCERPT = Path(__file__).resolve().parent / "data" / "mocap" / "perfume_mit" / "A_test.bvh"  # 3 s
+SALSA_EXCERPT = Path(__file__).resolve().parent / "data" / "mocap" / "cmu_daz_salsa" / "60_01_scaled.bvh"  # 2 s
 
 
 @pytest.fixture(scope="module")
@@ -63,8 +63,8 @@ def test_motifs_bad_input(tmp_path):
     text.write_text("this is not motion capture")
     assert_clean_failure(cli("motifs", text, "--json", out), out, "notes.bvh")
     assert_clean_failure(cli("motifs", tmp_path / "absent.bvh", "--json", out), out, "absent.bvh")
-    assert_clean_failure(cli("motifs", JPOP_EXCERPT, "--genre", "polka", "--json", out), out, "unknown genre", "salsa")
-    assert_clean_failure(cli("motifs", JPOP_EXCERPT, "--json", tmp_path / "nowhere" / "m.json"),
+    assert_clean_failure(cli("motifs", SALSA_EXCERPT, "--genre", "polka", "--json", out), out, "unknown genre", "salsa")
+    assert_clean_failure(cli("motifs", SALSA_EXCERPT, "--json", tmp_path / "nowhere" / "m.json"),
                          tmp_path / "nowhere" / "m.json", "does not exist")
 
 
@@ -75,7 +75,7 @@ def test_motifs_refuses_a_skeleton_without_legs_and_a_dance_too_short(tmp_path):
     legless = tmp_path / "legless.bvh"
     legless.write_text(TWO_JOINTS)
     assert_clean_failure(cli("motifs", legless, "--json", out), out, "legs")
-    lines = JPOP_EXCERPT.read_text().splitlines()
+    lines = SALSA_EXCERPT.read_text().splitlines()
     header = lines.index("MOTION")
     short = tmp_path / "short.bvh"
     body = lines[header + 3: header + 3 + 12]

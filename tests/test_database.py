@@ -33,7 +33,7 @@ def small_db():
 def test_genres_come_from_sub_folders(small_db):
     genres = {s.genre for s in small_db.styles.values()}
     # The 3dsMax fixture is one second of motion: too few beats to dance on, so it is left out.
-    assert genres == {"cmu_daz_salsa", "cmu_mb_fbx2bvh", "perfume_mit"}
+    assert genres == {"cmu_daz_salsa", "cmu_mb_fbx2bvh"}
     for style in small_db.styles.values():
         assert len(style.beat_frames) >= 3
         assert np.all(np.diff(style.beat_frames) > 0)
@@ -43,7 +43,7 @@ def test_genres_come_from_sub_folders(small_db):
 def test_a_manifest_assigns_genres(tmp_path):
     folder = tmp_path / "db"
     shutil.copytree(FIXTURES, folder)
-    (folder / "genres.toml").write_text('[genres]\nparty = ["perfume_mit/*.bvh", "cmu_daz_salsa/*.bvh"]\n')
+    (folder / "genres.toml").write_text('[genres]\nparty = ["cmu_mb_fbx2bvh/*.bvh", "cmu_daz_salsa/*.bvh"]\n')
     genres = {g for g, _ in collect_sources(folder)}
     assert genres == {"party"}
     (folder / "genres.toml").write_text("this is not toml = [")
@@ -126,13 +126,13 @@ def test_graphs_are_cached_and_rebuilt_when_anything_changes(perfume_db, bundled
 
 def test_a_folder_of_bvh_is_built_once_and_rebuilt_after_an_edit(tmp_path, cache):
     folder = tmp_path / "mine"
-    shutil.copytree(FIXTURES / "perfume_mit", folder / "jpop")
+    shutil.copytree(FIXTURES / "cmu_daz_salsa", folder / "salsa")
     first = open_database(folder)
     again = open_database(folder)
-    assert again.styles["jpop"].fingerprint == first.styles["jpop"].fingerprint
+    assert again.styles["salsa"].fingerprint == first.styles["salsa"].fingerprint
     built = list((cache / "databases").iterdir())
     assert len(built) == 1
-    bvh = next((folder / "jpop").glob("*.bvh"))
+    bvh = next((folder / "salsa").glob("*.bvh"))
     os.utime(bvh, (bvh.stat().st_atime, bvh.stat().st_mtime + 10))
     open_database(folder)
     assert len(list((cache / "databases").iterdir())) == 2
