@@ -87,8 +87,10 @@ def dance(song, output, character, bone_map, database, report_path, quiet, **opt
         click.echo(f"chosen    {s['style_reason']}")
     rep = s.get("repetition")
     if rep:
-        click.echo(f"material  {rep['material_minutes']:.1f} min captured; {rep['replayed_share']:.0%} of the beats replay "
-                   f"a move danced in the previous {rep['window_s']:g} s (longest run {rep['longest_repeat_beats']} beats)")
+        mirrored = f" (+ {rep['mirrored_minutes']:.1f} mirrored)" if rep.get("mirrored_minutes") else ""
+        click.echo(f"material  {rep['material_minutes']:.1f} min captured{mirrored}; {rep['replayed_share']:.0%} of the "
+                   f"beats replay a move danced in the previous {rep['window_s']:g} s (longest run "
+                   f"{rep['longest_repeat_beats']} beats)")
     if s.get("beats_per_bar"):
         period = s.get("dance_period_beats")
         click.echo(f"metre     {s['beats_per_bar']} beats per bar"

@@ -70,6 +70,8 @@ class EngineConfig:
                                       # one z unit of intensity mismatch (intensity_weight), so a fresh beat as
                                       # good as a replayed one wins (tuned on the tuning songs, docs/vocabulary.md)
     repeat_window_s: float = 60.0     # ... what a viewer remembers: eval.repetition counts replays within it
+    repeat_retries: int = 2           # ... and a segment whose path loops back onto its own beats is searched
+                                      # again with them charged, at most this often (0 = one search a segment)
     foot_lock: bool = True            # hold planted feet still through blends (leg IK)
     jump_cost: float = 1.0            # added to every jump (0 = paper): fewer, better-motivated jumps (each jump's
                                       # blend slides the feet; 0.25 before the larger database)
@@ -224,10 +226,22 @@ class GraphEngine:
         bars = segment.bar_position
         target = standardise(inten, mean, std) + bar_shape(None if bars is None else bars[:-1],
                                                             segment.beats_per_bar, self.config.bar_accent)
-        path = search(self.graph, target, np.diff(beats), start_nodes=start,
-                      prev_duration_s=state.prev_duration_s, thc=thc, node_penalty=penalty,
-                      steps=self.steps, intensity_weight=self.config.intensity_weight,
-                      **self._beat_costs(bars, segment.music_beat)).first(k)
+        def best(node_penalty):
+            return search(self.graph, target, np.diff(beats), start_nodes=start,
+                          prev_duration_s=state.prev_duration_s, thc=thc, node_penalty=node_penalty,
+                          steps=self.steps, intensity_weight=self.config.intensity_weight,
+                          **self._beat_costs(bars, segment.music_beat))
+
+        path = best(penalty)
+        # The memory knows the segments before this one; a path that comes back to its own beats (a loop
+        # within the segment) is searched again with those beats charged too.
+        for _ in range(self.config.repeat_retries if self.config.repeat_penalty > 0 else 0):
+            visits = np.bincount(path.nodes[1:], minlength=self.graph.n_nodes)
+            if visits.max() < 2:
+                break
+            penalty = penalty + self.config.repeat_penalty * (visits > 1)
+            path = best(penalty)
+        path = path.first(k)
         beats, bars = beats[:k + 1], None if bars is None else bars[:k + 1]
         count = None if segment.beat_count is None else segment.beat_count[:k + 1]
         seen = seen.copy()
