@@ -309,9 +309,10 @@ def test_the_metre_puts_the_strongest_stops_on_each_bars_first_beat(bundled_db):
         clip = dance(music, database=bundled_db, style="salsa")
         scores[known] = evaluate(clip, music_beats_s=beats, beat_in_bar=pos, beats_per_bar=3)
     # Every beat is hit either way (downbeat recall about 1); with the metre the "1" is hit hardest.
-    # Measured 0.86 with the metre, 0.24 without; chance 1/3.
+    # Measured 0.69 with the metre, 0.45 without; chance 1/3 (0.86 and 0.24 before the feet got their cost,
+    # AccentCosts.slide 4.5: a piece that stops on the "1" but slides its feet is no longer free).
     assert scores[True]["bar_accent_on_downbeat"] > scores[False]["bar_accent_on_downbeat"] + 0.2
-    assert scores[True]["bar_accent_on_downbeat"] > 0.7
+    assert scores[True]["bar_accent_on_downbeat"] > 0.6
     assert scores[True]["downbeat_recall"] > 0.9
 
 

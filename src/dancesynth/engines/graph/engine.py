@@ -78,7 +78,7 @@ class EngineConfig:
     signature_weight: float = DEFAULT_WEIGHT  # cost scale of a motif not owed, when following a signature
     # prefer pieces that stop on their beats and keep their feet (None = paper); the warp costs scale
     # with intensity_weight
-    accent: AccentCosts | None = AccentCosts(warp=16.0, far_warp=30.0, slide=3.0)
+    accent: AccentCosts | None = AccentCosts(warp=16.0, far_warp=30.0, slide=4.5)
     bar_accent: float = 0.5           # ask for this much more intensity (z units) on each bar's first beat,
                                       # less on the others: the big moves start on the "1" (0 = paper)
     downbeat_stop: float = 0.5        # on a bar's first beat, a stop of strength s costs s x this less
