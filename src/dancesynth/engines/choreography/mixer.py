@@ -59,7 +59,7 @@ class MixerConfig:
     accent: AccentCosts | None = AccentCosts()  # prefer words that stop on their beats and not between
     ease_beats: float = 0.3        # accent timing on each music beat (engines.stitch.ease; 0 = off)
     ease_downbeat: float = 0.3     # ... and this much harder on each bar's first beat
-    ease_max_rate: float | None = 1.5  # ... never faster between beats than this times the captured speed
+    ease_max_rate: float | None = 1.7  # ... never faster between beats than this times the captured speed
 
 
 @dataclass(frozen=True)

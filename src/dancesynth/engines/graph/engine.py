@@ -85,7 +85,7 @@ class EngineConfig:
     ease_beats: float = 0.3           # accent timing: play slower on each music beat, faster between
                                       # (stitch.ease; 0 = the paper's constant rate per piece)
     ease_downbeat: float = 0.45       # ... and this much harder on each bar's first beat
-    ease_max_rate: float | None = 1.5  # ... but never faster between beats than this times the captured speed
+    ease_max_rate: float | None = 1.7  # ... but never faster between beats than this times the captured speed
                                        # (stitch.ease_within; None = no limit)
     intensity_weight: float = 8.0     # eq. (8)'s intensity match against the stop, jump and repeat costs
                                       # beyond the paper (1 = the weight they were tuned at)
