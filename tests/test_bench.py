@@ -127,8 +127,10 @@ def test_beat_tracking_scores_each_tracker_by_tag(bench):
     s = bench[0]["beat_tracking"]
     assert s["trackers"] == ["dp"] and len(s["songs"]) == 2
     r = s["results"]["dp"]["mean"]
-    for key in ("f_measure", "cmlt", "amlt"):
+    for key in ("f_measure", "cmlt", "amlt", "p_score"):     # P-score: our scorer's, not a fallback's (issue 31)
         assert 0 <= r[key] <= 1
+    assert s["scorer"].startswith("dancesynth.eval.beat_metrics.beat_tracking_scores")
+    assert "fallback" not in format_bench(bench[0])
     assert r["f_measure"] > 0.5 and r["speed_x_realtime"] > 1
     assert r["f_3/4"] is not None and r["f_no drums"] is not None and r["f_step"] is None  # no step song here
     assert s["groups"]["constant"] == 2

@@ -3,8 +3,8 @@
 The songs come from ``dancesynth.bench.groundtruth`` (MIDI rendered by fluidsynth);
 each tracker in ``dancesynth.music.beats.TRACKERS`` runs through
 ``dancesynth.music.track_beats`` on the decoded audio, and is scored with
-``beat_tracking_scores`` (F-measure within 70 ms, continuity CMLt/AMLt, the first
-5 s skipped). Speed is audio duration over tracking time (onset envelope included),
+``eval.beat_metrics.beat_tracking_scores`` (F-measure within 70 ms, continuity CMLt/AMLt,
+McKinney's P-score, the first 5 s skipped). Speed is audio duration over tracking time (onset envelope included),
 after one untimed warm-up call per tracker (librosa compiles its kernels then).
 
 The ``streaming`` row is the live tracker (``dancesynth.live.beats``) fed each song
@@ -40,7 +40,7 @@ TAG_GROUPS = {
     "3/4": lambda t: t.get("meter") == "3/4",
     "no drums": lambda t: not t.get("drums", True),
 }
-SCORES = ("f_measure", "cmlc", "cmlt", "amlc", "amlt")
+SCORES = ("f_measure", "cmlc", "cmlt", "amlc", "amlt", "p_score")
 STREAMING = "streaming"
 STREAM_CHUNK_S = 0.1
 STREAM_UPDATE_S = 5.0
@@ -51,24 +51,7 @@ FIRST_BEAT = "first beat, 4/4"
 SETTLE_S = 10.0
 
 
-def _scorer():
-    """``beat_tracking_scores`` from the metrics module, wherever it lives; mir_eval as the fallback."""
-    for module in ("metrics", "evaluate"):
-        try:
-            mod = __import__(f"{__package__}.{module}", fromlist=["beat_tracking_scores"])
-            return mod.beat_tracking_scores, f"dancesynth.eval.{module}.beat_tracking_scores"
-        except (ImportError, AttributeError):
-            continue
-    import mir_eval
-
-    def scores(reference_beats_s, estimated_beats_s, *, window_s=0.07, skip_s=5.0) -> dict:
-        ref = mir_eval.beat.trim_beats(np.asarray(reference_beats_s, float), min_beat_time=skip_s)
-        est = mir_eval.beat.trim_beats(np.asarray(estimated_beats_s, float), min_beat_time=skip_s)
-        f = mir_eval.beat.f_measure(ref, est, f_measure_threshold=window_s)
-        cmlc, cmlt, amlc, amlt = mir_eval.beat.continuity(ref, est)
-        return {"f_measure": f, "cmlc": cmlc, "cmlt": cmlt, "amlc": amlc, "amlt": amlt}
-
-    return scores, "mir_eval (fallback: no beat_tracking_scores in dancesynth.eval)"
+SCORER = "dancesynth.eval.beat_metrics.beat_tracking_scores (mir_eval's definitions)"
 
 
 def beat_tracking(cfg: BenchConfig, progress: Progress | None = None) -> dict:
@@ -79,7 +62,8 @@ def beat_tracking(cfg: BenchConfig, progress: Progress | None = None) -> dict:
     from ..music.beats import TRACKERS
     from .groundtruth import ground_truth_set
 
-    score, scorer = _scorer()
+    from ..eval.beat_metrics import beat_tracking_scores as score
+
     trackers = list(cfg.trackers or sorted(TRACKERS) + [STREAMING])
     kwargs = {"quick": cfg.groundtruth_quick, "progress": progress}
     if cfg.groundtruth_specs is not None:
@@ -118,7 +102,7 @@ def beat_tracking(cfg: BenchConfig, progress: Progress | None = None) -> dict:
         progress(f"downbeats and metre on {len(songs)} songs")
     downbeats = downbeat_tracking(songs, audio, streamed=streamed or None)
     streaming = {"latency_s": LATENCY_S, "chunk_s": STREAM_CHUNK_S, "update_every_s": STREAM_UPDATE_S}
-    return {"trackers": trackers, "songs": [s.name for s in songs], "scorer": scorer,
+    return {"trackers": trackers, "songs": [s.name for s in songs], "scorer": SCORER,
             **({"streaming": streaming} if STREAMING in trackers else {}),
             "groups": {g: sum(1 for s in songs if pred(s.tags)) for g, pred in TAG_GROUPS.items()},
             "results": results, "downbeats": downbeats}
@@ -135,7 +119,8 @@ def downbeat_tracking(songs, audio, *, streamed: list | None = None) -> dict:
     from ..music import analyze_music
     from ..music.metre import default_positions, track_metre
 
-    score, _ = _scorer()
+    from ..eval.beat_metrics import beat_tracking_scores as score
+
     rows = {ANALYSIS: [], STREAMING: [], FIRST_BEAT: []}
     for k, (song, (y, sr)) in enumerate(zip(songs, audio)):
         music = analyze_music(y=y, sr=sr)
@@ -270,10 +255,11 @@ def _nanmean(values) -> float | None:
 
 def format_beat_tracking(s: dict) -> str:
     groups = list(TAG_GROUPS)
-    rows = [[name, r["mean"]["f_measure"], r["mean"]["cmlt"], r["mean"]["amlt"], r["mean"]["speed_x_realtime"]]
-            + [r["mean"][f"f_{g}"] for g in groups] for name, r in s["results"].items()]
+    rows = [[name, r["mean"]["f_measure"], r["mean"]["cmlt"], r["mean"]["amlt"], r["mean"].get("p_score"),
+             r["mean"]["speed_x_realtime"]] + [r["mean"][f"f_{g}"] for g in groups] for name, r in s["results"].items()]
     counts = ", ".join(f"{g} {n}" for g, n in s["groups"].items())
-    notes = [f"F within 70 ms, continuity within 17.5% of the beat, first 5 s skipped; scored by {s['scorer']}",
+    notes = [f"F within 70 ms, continuity within 17.5% of the beat, P-score within 20% of the beat, first 5 s "
+             f"skipped; scored by {s['scorer']}",
              f"songs per group: {counts} (- : no song in the group)"]
     if "streaming" in s:
         st = s["streaming"]
@@ -281,8 +267,8 @@ def format_beat_tracking(s: dict) -> str:
                      f"{st['update_every_s']:g} s; a beat is given once {st['latency_s']:g} s old (its latency)")
     text = table(
         f"Beat tracking on {len(s['songs'])} generated songs with exact beats (MIDI rendered by fluidsynth)",
-        ["tracker", "F", "CMLt", "AMLt", "x real time"] + [f"F {g}" for g in groups], rows,
-        [0, 3, 3, 3, 0] + [3] * len(groups), notes=notes)
+        ["tracker", "F", "CMLt", "AMLt", "P", "x real time"] + [f"F {g}" for g in groups], rows,
+        [0, 3, 3, 3, 3, 0] + [3] * len(groups), notes=notes)
     return text + ("\n\n" + format_downbeat_tracking(s["downbeats"]) if "downbeats" in s else "")
 
 
