@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import shutil
 import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -228,3 +229,30 @@ def test_a_damaged_mp3_is_decoded_without_the_decoders_notes_on_stderr(tmp_path,
     assert len(y) / sr == pytest.approx(8.0, abs=0.3) and np.all(np.isfinite(y))
     err = capfd.readouterr().err
     assert "resync" not in err.lower() and "mpg123" not in err, err
+
+
+@pytest.mark.parametrize("container", ["wav", "aiff", "caf"])
+@pytest.mark.parametrize("channels", [300, 1024, 4096, 65535])
+def test_absurd_channel_counts_are_refused_before_decoding(tmp_path, container, channels):
+    """Issue 31: a header claiming 65,535 channels made the down-mix's argument list too long for ffmpeg (exit
+    70). Past 256 channels the header is refused, whichever reader would take it, in one line."""
+    import struct
+
+    from dancesynth.io.audio import MAX_CHANNELS, probe_audio
+
+    plain = tmp_path / f"plain.{container}"
+    codec = "pcm_s16le" if container == "wav" else "pcm_s16be"
+    subprocess.run(["ffmpeg", "-loglevel", "error", "-y", "-f", "lavfi", "-i", "sine=frequency=440:duration=5",
+                    "-ac", "1", "-ar", "8000", "-c:a", codec, str(plain)], check=True)
+    buf = bytearray(plain.read_bytes())
+    chunk, skip, code = {"wav": (b"fmt ", 10, "<H"), "aiff": (b"COMM", 8, ">H"), "caf": (b"desc", 36, ">I")}[container]
+    at = buf.index(chunk) + skip
+    struct.pack_into(code, buf, at, channels)
+    bad = tmp_path / f"bad.{container}"
+    bad.write_bytes(bytes(buf))
+    with pytest.raises(InputError, match="channels"):
+        probe_audio(bad)
+    assert channels > MAX_CHANNELS
+    proc = subprocess.run([sys.executable, "-m", "dancesynth.cli", "beats", str(bad)], capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1

@@ -1,8 +1,8 @@
-"""Audio loading (``dancesynth.io.audio.load_audio``) of mutated WAV, FLAC, Ogg and MP3 files.
+"""Audio loading (``dancesynth.io.audio.load_audio``) of mutated WAV, AIFF, CAF, FLAC, Ogg and MP3 files.
 
 Mutates: 5-second excerpts of a bundled song made with ffmpeg (WAV 16-bit mono
-and stereo, WAV float, FLAC, Ogg Vorbis, MP3, and M4A for the ffmpeg path), by
-setting header fields to hostile values (channel counts up to 65535, sample
+and stereo, WAV float, AIFF, CAF, FLAC, Ogg Vorbis, MP3, and M4A for the ffmpeg path), by
+setting header fields to hostile values (channel counts from 0 to 65535, sample
 rates 0 / huge, bit depths, data sizes; the Ogg page CRC is recomputed so the
 change reaches the decoder) and by generic byte mutations (flips, cuts,
 truncation, junk before or after).
@@ -33,9 +33,11 @@ SEEDS = {
     "song.ogg": ["-ac", "2", "-ar", "8000", "-c:a", "libvorbis", "-q:a", "0"],
     "song.mp3": ["-ac", "1", "-ar", "8000", "-c:a", "libmp3lame", "-b:a", "16k"],
     "song.m4a": ["-ac", "1", "-ar", "8000", "-c:a", "aac", "-b:a", "16k"],
+    "song.aiff": ["-ac", "1", "-ar", "8000", "-c:a", "pcm_s16be"],
+    "song.caf": ["-ac", "1", "-ar", "8000", "-c:a", "pcm_s16be"],
 }
 SR = 22050
-CHANNELS = [0, 1, 2, 3, 8, 255, 256, 4096, 65535]
+CHANNELS = [0, 1, 2, 3, 8, 255, 256, 257, 300, 1024, 4096, 32767, 65535]
 RATES = [0, 1, 7, 8000, 44100, 192000, 384000, 10 ** 6, 2 ** 31 - 1, 2 ** 32 - 1]
 
 
@@ -89,7 +91,8 @@ class AudioTarget(Target):
 def _mutate(rng: random.Random, name: str, data: bytes) -> tuple[bytes, str]:
     r = rng.random()
     if r < 0.45:
-        header = {".wav": _wav_field, ".flac": _flac_field, ".ogg": _ogg_field}.get(Path(name).suffix)
+        header = {".wav": _wav_field, ".flac": _flac_field, ".ogg": _ogg_field, ".aiff": _aiff_field,
+                  ".caf": _caf_field}.get(Path(name).suffix)
         if header is not None:
             return header(rng, bytearray(data))
     if r < 0.55:
@@ -119,6 +122,26 @@ def _wav_field(rng: random.Random, buf: bytearray) -> tuple[bytes, str]:
     value = rng.choice(values)
     struct.pack_into(fmt_code, buf, at, value)
     return bytes(buf), f"{field}={value}"
+
+
+def _aiff_field(rng: random.Random, buf: bytearray) -> tuple[bytes, str]:
+    """The COMM chunk's channel count (big-endian 16 bits) or frame count (32 bits)."""
+    comm = buf.index(b"COMM") + 8
+    field, at, code = rng.choice([("channels", comm, ">H"), ("frames", comm + 2, ">I")])
+    value = rng.choice(CHANNELS if field == "channels" else [0, 1, 2 ** 31, 2 ** 32 - 1])
+    struct.pack_into(code, buf, at, value)
+    return bytes(buf), f"aiff {field}={value}"
+
+
+def _caf_field(rng: random.Random, buf: bytearray) -> tuple[bytes, str]:
+    """The desc chunk: sample rate (float64), then bytes/frames per packet, channels per frame, bits (32 bits)."""
+    desc = buf.index(b"desc") + 12
+    field, at, code, values = rng.choice([("channels", desc + 24, ">I", CHANNELS + [2 ** 32 - 1]),
+                                          ("rate", desc, ">d", [0.0, -1.0, 1e12, float("nan")]),
+                                          ("bits", desc + 28, ">I", [0, 1, 64, 2 ** 32 - 1])])
+    value = rng.choice(values)
+    struct.pack_into(code, buf, at, value)
+    return bytes(buf), f"caf {field}={value}"
 
 
 def _flac_field(rng: random.Random, buf: bytearray) -> tuple[bytes, str]:

@@ -33,6 +33,9 @@ DEFAULT_SR = 22050
 DEFAULT_MAX_DURATION_S = MAX_SONG_S
 _NOISY_FORMATS = {"MP3", "MPEG"}
 DEFAULT_MIN_DURATION_S = 4.0
+#: More channels than this is a corrupt header, not music (studio multitracks stop well short): refused before
+#: decoding, since the down-mix names every channel (65,535 made ffmpeg's argument list too long).
+MAX_CHANNELS = 256
 
 # Formats a user can always convert to; named in every "cannot decode" message.
 _CONVERT_HINT = "convert it to wav, flac, ogg or mp3 (e.g. `ffmpeg -i IN out.wav`)"
@@ -94,6 +97,10 @@ def probe_audio(path) -> AudioInfo:
                            float(info.frames) / info.samplerate, str(info.format), "soundfile")
     else:
         result = _ffprobe(path)
+    if result.channels > MAX_CHANNELS:
+        raise InputError(f"{path}: the header says {result.channels} channels, and dancesynth reads at most "
+                         f"{MAX_CHANNELS}: the header is corrupt, or down-mix the file first "
+                         "(`ffmpeg -i IN -ac 2 out.wav`)")
     _check_container_complete(result)
     return result
 
