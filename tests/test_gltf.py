@@ -353,3 +353,26 @@ def test_three_js_draws_the_mannequin_dancing_in_a_browser(mannequin_salsa, tmp_
     union = mask_a | mask_b
     changed = union & (np.abs(a - b).max(axis=2) > 0.15)
     assert changed.sum() > 0.25 * union.sum()                     # the figure moved between the two times
+
+
+@pytest.mark.blender
+def test_the_readme_workaround_lets_debians_blender_import_a_skinned_glb(mannequin_salsa, tmp_path):
+    """Issue 31: Debian's Blender 3.4 cannot import a .glb with normals from its menu (numpy.bool is gone); the
+    README says so and gives a one-line workaround, which must work."""
+    import re
+
+    if not _blender_has_numpy():
+        pytest.skip("needs blender with numpy for its glTF importer")
+    workaround = re.search(r"run `(import numpy; numpy\.bool = bool)`", (REPO / "README.md").read_text()).group(1)
+    path = write_glb(tmp_path / "dance.glb", mannequin_salsa, mannequin_character().mesh)
+    results = {}
+    for shim in ("", workaround + "; "):
+        expr = (f"{shim}import bpy\ntry:\n    bpy.ops.import_scene.gltf(filepath={str(path)!r})\n"
+                "    print('IMPORTED', len(bpy.data.meshes))\nexcept Exception as e:\n    print('FAILED', e)\n")
+        proc = subprocess.run(["blender", "-b", "--factory-startup", "--python-expr", expr],
+                              capture_output=True, text=True, timeout=300)
+        results[bool(shim)] = proc.stdout + proc.stderr
+    if "IMPORTED" in results[False]:
+        pytest.skip("this Blender's glTF importer does not need the workaround")
+    assert "numpy" in results[False] and "bool" in results[False]        # the failure the README names
+    assert re.search(r"IMPORTED [1-9]", results[True]), results[True][-2000:]
