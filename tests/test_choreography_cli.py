@@ -57,3 +57,16 @@ def test_recreate_from_a_dance_on_another_skeleton(tmp_path, bundled_db):
     write_bvh(ref, bundled_db.styles["mj"].clip(0))
     assert_clean_failure(cli("dance", SONG, "-o", out, "--style", "salsa", "--recreate", ref), out,
                          "skeleton of 31 joints", "no style uses")
+
+
+@pytest.mark.parametrize("how", [("--engine", "choreography"), ("--motif-at", "1.0=M3")])
+def test_paper_is_refused_for_the_choreography_engine(tmp_path, how):
+    """Issue 31: --paper with the choreography engine ran silently with none of the paper's settings."""
+    out = tmp_path / "d.bvh"
+    assert_clean_failure(cli("dance", SONG, *how, "--paper", "-o", out), out, "--paper", "choreography")
+
+
+def test_paper_help_says_what_stays_on():
+    text = " ".join(run("dance", "--help").stdout.split())
+    for stays in ("dead-end closing", "snapped", "loudness standardised", "foot lock", "beat warp", "choreography"):
+        assert stays in text, stays

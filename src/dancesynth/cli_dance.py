@@ -40,10 +40,13 @@ _OPTIONS = [
     click.option("--ths", type=float, default=None, help="Eq. (1) threshold for transitions (default 3.0)."),
     click.option("--thr", type=float, default=None, help="Eq. (2) floor of a transition's weight, > 1 (default 1.5)."),
     click.option("--paper", is_flag=True,
-                 help="Xu et al.'s graph and objective as printed: no repeat penalty, jump cost, jump limits or "
-                      "accent costs, literal eq. (1). Still on: style and level choice, glitch skipping, blends "
-                      "and foot lock (README: 'Where we depart from or add to the paper'). With --engine neural: "
-                      "the network's motion without the spread post-filter (docs/neural.md)."),
+                 help="Xu et al.'s graph and objective as printed: no repeat memory, jump cost, jump limits, "
+                      "accent timing or accent costs, literal eq. (1). Still on: style and level choice, glitch "
+                      "skipping, dead-end closing, the database's beats as built (snapped to the nearest stop), "
+                      "loudness standardised by what has been heard, blends and foot lock (README: 'Where we "
+                      "depart from or add to the paper'). With --engine neural: the network's motion without the "
+                      "spread post-filter; its beat warp, foot lock and hand clearance stay on (docs/neural.md). "
+                      "Not for --engine choreography, which has no paper preset."),
 ]
 
 def dance_options(command):
@@ -65,6 +68,10 @@ def dance_config(*, style, engine, recreate, motif_at, follow_signature, segment
     from .engines.graph.meta_graph import GraphConfig
 
     if paper:
+        if config.engine == "choreography":
+            raise InputError("--paper has no preset for the choreography engine (its mixer is Aristidou et al.'s "
+                             "with the additions docs/choreography.md lists, which have no switch back): leave out "
+                             "--paper, or use it with --engine streaming, global or neural")
         config = replace(config, graph=GraphConfig.paper(), render=EngineConfig.paper(), restore_spread=False)
     if ths is not None or thr is not None:
         try:
