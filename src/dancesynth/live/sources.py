@@ -3,19 +3,26 @@
 Every source is decoded by one ffmpeg process into mono 16-bit samples at the
 analysis rate; a reader thread turns its output into chunks on a bounded queue, so
 the consumer can wait with a timeout and notice a stall without blocking. ffmpeg
-does what it is good at: formats, resampling, http with reconnection, pacing a
-file at its native rate (``-re``).
+does what it is good at: formats, resampling, pacing a file at its native rate
+(``-re``). An http(s) stream's bytes are fetched here (urllib) and fed to ffmpeg's
+standard input, so that its end can be judged by the container's own end mark (an Ogg
+stream's last page, a WAV's length) or the announced length: ffmpeg reports any http
+stream that closes without a length as an error, a finished one too. A connection that
+breaks is resumed with an HTTP Range request where the server accepts them.
 """
 
 from __future__ import annotations
 
 import contextlib
+import http.client
 import queue
 import shutil
 import subprocess
 import sys
 import threading
 import time
+import urllib.error
+import urllib.request
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +42,9 @@ CONTAINER_MAGICS = (b"OggS", b"RIFF", b"fLaC", b"ID3")
 SYNC_SEARCH_BYTES = 1 << 16
 # An Ogg page is at most 65,307 bytes: the last one is always in a tail this long.
 TAIL_BYTES = 1 << 17
+# A broken http connection is resumed (HTTP Range) at most this often in a row, waiting up to this long.
+HTTP_RESUMES = 5
+HTTP_RESUME_WAIT_S = 4.0
 
 
 @dataclass(frozen=True)
@@ -61,7 +71,9 @@ class AudioSource:
         self._done = False
         self._closing = False
         self._stderr: deque = deque(maxlen=20)  # ffmpeg's last lines; drained as it goes so it never blocks
-        self._ends: tuple[bytes, bytes, int] | None = None  # head, tail and size of the bytes fed (stdin)
+        self._ends: tuple[bytes, bytes, int] | None = None  # head, tail and size of the bytes fed (stdin, http)
+        self._net_error = ""          # why an http stream broke off ('' : it ended, or has not yet)
+        self._net_complete = False    # it ended with every byte its length announced
         self.error = ""
         exe = shutil.which("ffmpeg")
         if exe is None:
@@ -74,14 +86,11 @@ class AudioSource:
         self.path: Path | None = None
         if spec == "-":
             cmd = [exe, "-hide_banner", "-loglevel", "error", *quick_probe, "-i", "pipe:0"]
-            stdin = subprocess.PIPE  # fed by _pump_stdin, which skips junk before the container
+            stdin = subprocess.PIPE  # fed by _pump, which skips junk before the container
         elif self.network:
             # -re: a whole file served over http plays at its pace too; a live stream sets its own.
-            # Reconnect only where the server can resume (HTTP ranges): ffmpeg's -reconnect_streamed
-            # asks a server without ranges for the file again and plays it from the start as new time.
-            cmd += (["-re"] if realtime else []) + [
-                "-reconnect", "1", "-reconnect_delay_max", "4",
-                "-rw_timeout", str(int(HTTP_TIMEOUT_S * 1e6)), *quick_probe, "-i", spec]
+            cmd += (["-re"] if realtime else []) + [*quick_probe, "-i", "pipe:0"]
+            stdin = subprocess.PIPE  # fed by _pump from _http_chunks
         else:
             self.path = Path(spec)
             if not self.path.is_file():
@@ -92,7 +101,9 @@ class AudioSource:
         self._stderr_reader = threading.Thread(target=self._drain_stderr, daemon=True)
         self._stderr_reader.start()
         if spec == "-":
-            threading.Thread(target=self._pump_stdin, daemon=True).start()
+            threading.Thread(target=self._pump, args=(self._stdin_chunks(), True), daemon=True).start()
+        elif self.network:
+            threading.Thread(target=self._pump, args=(self._http_chunks(), False), daemon=True).start()
         self._reader = threading.Thread(target=self._read_loop, daemon=True)
         self._reader.start()
 
@@ -100,24 +111,28 @@ class AudioSource:
         for line in self._proc.stderr:
             self._stderr.append(line.decode("utf-8", "replace").strip())
 
-    def _pump_stdin(self) -> None:
-        """Our standard input into ffmpeg's, from the first container signature on; keeps the first and
-        last bytes to check the container's end."""
+    @staticmethod
+    def _stdin_chunks():
+        src = sys.stdin.buffer
+        while data := (src.read1(1 << 16) if hasattr(src, "read1") else src.read(1 << 16)):
+            yield data
+
+    def _pump(self, chunks, skip_junk: bool) -> None:
+        """``chunks`` (bytes) into ffmpeg's standard input (with ``skip_junk``, from the first container
+        signature on); keeps the first and last bytes to check the container's end."""
         dst = self._proc.stdin
         head, tail, size = b"", b"", 0
         try:
-            src = sys.stdin.buffer
-            while len(head) < SYNC_SEARCH_BYTES:
-                data = src.read1(SYNC_SEARCH_BYTES) if hasattr(src, "read1") else src.read(SYNC_SEARCH_BYTES)
-                if not data:
-                    break
+            chunks = iter(chunks)
+            for data in chunks:
                 head += data
-                if len(head) >= 4 and (_is_container(head) or _mp3_sync(head) or _first_sync(head) > 0):
+                if not skip_junk or len(head) >= SYNC_SEARCH_BYTES or len(head) >= 4 and (
+                        _is_container(head) or _mp3_sync(head) or _first_sync(head) > 0):
                     break
-            head = head[_first_sync(head):]
+            head = head[_first_sync(head):] if skip_junk else head
             dst.write(head)
             tail, size = head[-TAIL_BYTES:], len(head)
-            while data := (src.read1(1 << 16) if hasattr(src, "read1") else src.read(1 << 16)):
+            for data in chunks:
                 dst.write(data)
                 tail, size = (tail + data)[-TAIL_BYTES:], size + len(data)
             self._ends = (head[:12], tail, size)
@@ -126,6 +141,53 @@ class AudioSource:
         finally:
             with contextlib.suppress(OSError):
                 dst.close()
+
+    def _http_chunks(self):
+        """The bytes of the http(s) stream. A connection that breaks (an error, or fewer bytes than its
+        length) is resumed with a Range request where the server said it accepts them, up to
+        ``HTTP_RESUMES`` times in a row; else, or when the server cannot resume, ``_net_error`` says why
+        it broke off. A server that ignores Range would send the file from its start again: that is
+        never played as new music."""
+        got, length, ranges, resumes = 0, None, False, 0
+        while not self._closing:
+            try:
+                request = urllib.request.Request(self.spec, headers={
+                    "User-Agent": "dancesynth", **({"Range": f"bytes={got}-"} if got else {})})
+                response = urllib.request.urlopen(request, timeout=HTTP_TIMEOUT_S)
+            except urllib.error.HTTPError as exc:
+                self._net_error = f"the server answered {exc.code} {exc.reason}"
+                return
+            except (urllib.error.URLError, OSError, ValueError, http.client.HTTPException) as exc:
+                self._net_error = str(getattr(exc, "reason", exc)) or type(exc).__name__
+                return
+            broke = ""
+            with response:
+                if got and not (response.status == 206 and
+                                response.headers.get("Content-Range", "").startswith(f"bytes {got}-")):
+                    self._net_error = f"the connection broke after {got} bytes and the server cannot resume it"
+                    return
+                if not got:
+                    length = response.headers.get("Content-Length")
+                    length = int(length) if length and length.isdigit() else None
+                    ranges = response.headers.get("Accept-Ranges", "").lower() == "bytes"
+                try:
+                    while data := response.read1(1 << 16):
+                        got += len(data)
+                        resumes = 0
+                        yield data
+                except (OSError, http.client.HTTPException) as exc:  # a reset, a timeout, a short chunk
+                    broke = str(exc) or type(exc).__name__
+            if length is None and not broke:
+                return      # the connection closed: the container's end says whether the stream is whole
+            if length is not None and got >= length:
+                self._net_complete = True
+                return
+            why = broke or f"the connection closed after {got} of {length} bytes"
+            if not ranges or resumes >= HTTP_RESUMES:
+                self._net_error = why
+                return
+            resumes += 1
+            time.sleep(min(0.5 * 2 ** resumes, HTTP_RESUME_WAIT_S))
 
     def _read_loop(self) -> None:
         out = self._proc.stdout
@@ -150,10 +212,18 @@ class AudioSource:
         """Empty when the source ended as it should, else why not (see the class)."""
         self._stderr_reader.join(timeout=2.0)  # ffmpeg has exited: its last line is on the way
         last = self._stderr[-1] if self._stderr else ""
-        # A network source that gives up after its reconnects still exits 0; its last word is then
-        # "URL: Input/output error" (a reconnect that succeeds leaves only "[http @ ...]" notes).
-        if last and (self._proc.returncode != 0 or (self.network and last.startswith(self.spec))):
+        if last and self._proc.returncode != 0:
             return last[:300]
+        if self.network:
+            if self._net_error or self._net_complete:
+                return self._net_error
+            if not self._ends:
+                return ""
+            cut = _cut_off(*self._ends)
+            if cut or _has_end_mark(self._ends[0]):
+                return cut
+            return ("the connection closed, and the stream states neither its length nor its end "
+                    "(an MP3 or AAC radio has no end mark)")
         if self.path is not None:
             try:
                 with open(self.path, "rb") as fh:
@@ -244,6 +314,11 @@ def _first_sync(head: bytes) -> int:
         return 0
     found = [i for i in (head.find(m) for m in CONTAINER_MAGICS) if i > 0]
     return min(found, default=0)
+
+
+def _has_end_mark(head: bytes) -> bool:
+    """Whether the container starting with ``head`` marks its own end (``_cut_off`` can tell a whole one)."""
+    return head.startswith(b"OggS") or head.startswith(b"RIFF") and head[8:12] == b"WAVE"
 
 
 def _cut_off(head: bytes, tail: bytes, size: int) -> str:
