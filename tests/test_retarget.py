@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from conftest import SHARED_MOCAP
-from user_rigs import apose_mixamo_bvh
+from user_rigs import apose_mixamo_bvh, blender_style_bvh
 from test_cli import TRUMPET, assert_clean_failure, cli
 from dancesynth import rotations as rot
 from dancesynth.errors import InputError
@@ -203,3 +203,68 @@ def test_fingers_follow_the_source_when_both_rigs_have_them(dances):
         cos = np.sum(want * got, -1) / np.linalg.norm(want, axis=-1) / np.linalg.norm(got, axis=-1)
         assert np.degrees(np.arccos(np.clip(cos, -1, 1))).max() < 1.0, finger
     assert not any("Index" in b for b in builtin_character("mannequin").bones)
+
+
+def _blender_positions(bvh, frames, tmp_path) -> dict:
+    """Bone heads in Blender's own BVH importer at ``frames``: {frame: {bone: (x, y, z)}}, Z up, file units."""
+    import json
+    import shutil
+    import subprocess
+
+    from conftest import REPO
+
+    if shutil.which("blender") is None:
+        pytest.skip("needs blender (bash scripts/setup.sh --test installs it)")
+    report = tmp_path / "blender.json"
+    subprocess.run(["blender", "-b", "--factory-startup", "--python", str(REPO / "tests" / "clients" /
+                    "blender_import.py"), "--", str(bvh), str(read_bvh(bvh).n_frames), str(report),
+                    ",".join(map(str, frames))], capture_output=True, text=True, timeout=300)
+    data = json.loads(report.read_text())
+    assert data["errors"] == [], data["errors"]
+    return {int(f): v for f, v in data["head_positions"].items()}
+
+
+@pytest.mark.blender
+def test_a_blender_style_rig_in_centimetres_dances_on_its_floor_in_its_own_units(tmp_path):
+    """Issue 31: a rig whose root OFFSET is its rest position and whose position channels are absolute (Blender,
+    Mixamo) was read with its hips at twice their height, and its dance came back in metres with the feet
+    0.95 m above the floor in Blender. Read as Blender reads it, it dances on its floor, in centimetres."""
+    rig = blender_style_bvh(tmp_path)
+    read = read_bvh(rig)
+    assert read.meta["root_channels"] == "absolute" and read.meta["source_units"] == "cm"
+    assert read.root_pos[0, 1] == pytest.approx(0.96, abs=1e-6)          # not 1.92
+    out = tmp_path / "mine.bvh"
+    r = cli(*["dance", TRUMPET, "--character", str(rig), "-o", str(out), "-q"])
+    assert r.returncode == 0, (r.stdout + r.stderr)
+    text = out.read_text()
+    assert read_bvh(out).meta["source_units"] == "cm"
+    raw_rig, raw_out = (read_bvh(p, to_metres=False) for p in (rig, out))
+    assert raw_out.skeleton.names == raw_rig.skeleton.names and "mixamorig:Hips" in text
+    assert np.allclose(raw_out.skeleton.offsets[1:], raw_rig.skeleton.offsets[1:], atol=1e-4)   # its own cm
+    # Feet on the floor and the hips at a standing height, in our reading and in Blender's.
+    _, rest = clip_fk(read)
+    floor = rest[0, :, 1].min()                                   # the rig's one frame stands on its floor
+    leg = rest[0, 0, 1] - floor                                   # hips above it, standing straight
+    dance = read_bvh(out)
+    _, pos = clip_fk(dance)
+    feet = [dance.skeleton.index(f"mixamorig:{s}Foot") for s in ("Left", "Right")]
+    assert pos[:, feet, 1].min() >= floor - 0.02 - 0.1            # ankles: the toes reach 10 cm lower at most
+    assert 0.8 <= np.median(pos[:, 0, 1] - floor) / leg <= 1.0
+    frames = [0, dance.n_frames // 2, dance.n_frames - 1]
+    blender = _blender_positions(out, frames, tmp_path)
+    for f in frames:   # Blender keeps the file's centimetres (global_scale 1), Z up
+        assert blender[f]["mixamorig:Hips"][2] / 100.0 == pytest.approx(pos[f, 0, 1], abs=0.01), f
+        for s, j in zip(("Left", "Right"), feet):
+            assert blender[f][f"mixamorig:{s}Foot"][2] / 100.0 == pytest.approx(pos[f, j, 1], abs=0.01), f
+
+
+def test_a_root_channel_added_to_its_offset_is_read_so(tmp_path):
+    """iClone writes the root's position channels relative to its OFFSET (three.js adds the two): such a file
+    keeps that reading, so the dancer is not sunk into the floor."""
+    text = blender_style_bvh(tmp_path).read_text().splitlines()
+    values = text[-1].split()
+    values[1] = "0.500000"                                    # 0.5 cm above the rest position
+    (tmp_path / "added.bvh").write_text("\n".join(text[:-1] + [" ".join(values)]) + "\n")
+    clip = read_bvh(tmp_path / "added.bvh")
+    assert clip.meta["root_channels"] == "added to the OFFSET"
+    assert clip.root_pos[0, 1] == pytest.approx(0.965, abs=1e-6)

@@ -31,3 +31,19 @@ def apose_mixamo_bvh(folder: Path, scale: float = 100.0) -> Path:
     path = Path(folder) / "my_rig.bvh"
     path.write_text(format_bvh(MotionClip(rig, 30.0, offsets[:1] * scale, np.tile(rot.IDENTITY, (1, sk.n_joints, 1)))))
     return path
+
+
+def blender_style_bvh(folder: Path, scale: float = 100.0) -> Path:
+    """A Mixamo-named T-pose rig in centimetres as Blender, Mixamo and MotionBuilder write it: the root's
+    OFFSET is its rest position (the hips 0.9 m up) and its position channels hold the absolute position
+    (the same 90 cm), not an addition to it; its one frame stands on the floor."""
+    sk, _ = rig_skeleton("mixamo")
+    rig = sk.scaled(scale)
+    text = format_bvh(MotionClip(rig, 30.0, sk.offsets[:1] * scale, np.tile(rot.IDENTITY, (1, sk.n_joints, 1))))
+    hips = sk.offsets[0] * scale
+    lines = text.splitlines()
+    at = next(i for i, line in enumerate(lines) if line.strip().startswith("OFFSET"))   # the root's
+    lines[at] = lines[at].split("OFFSET")[0] + f"OFFSET {hips[0]:.6f} {hips[1]:.6f} {hips[2]:.6f}"
+    path = Path(folder) / "blender_rig.bvh"
+    path.write_text("\n".join(lines) + "\n")
+    return path

@@ -55,7 +55,8 @@ def stream(source, output, segment_seconds, style, fps, seed, database, follow_s
     config = LiveConfig(segment_s=segment_seconds, style=style, fps=fps, seed=seed, database=database,
                         follow_signature=follow_signature)
     with AudioSource(source, realtime=not fast) as src, CompleteBVHWriter(output) as writer:
-        sink = writer.append if on_character is None else (lambda clip: writer.append(on_character(clip)))
+        sink = writer.append if on_character is None else (
+            lambda clip: writer.append(on_character.character.in_own_units(on_character(clip))))
         summary = run_live(src, sink, config=config, on_report=report, realtime=not fast)
     if summary["frames"] == 0:
         raise InputError(f"{source}: the stream ended before a single segment could be danced")

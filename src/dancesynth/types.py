@@ -129,6 +129,14 @@ class MotionClip:
     def n_frames(self) -> int:
         return self.local_rot.shape[0]
 
+    def scaled(self, factor: float) -> "MotionClip":
+        """The same motion with every length (offsets, root and joint positions) multiplied by ``factor``."""
+        if factor == 1.0:
+            return self
+        return MotionClip(self.skeleton.scaled(factor), self.fps, self.root_pos * factor, self.local_rot,
+                          None if self.local_pos is None else self.local_pos * factor, self.contacts,
+                          dict(self.meta), self.provenance)
+
     @property
     def duration_s(self) -> float:
         """Time from the first to the last frame."""

@@ -64,7 +64,7 @@ def write_dance(output: Path, clip, character, *, song: Path | None = None, prog
     if suffix == ".bvh":  # block by block: a long dance's text is never whole in memory
         from ..io.bvh_writer import write_bvh
 
-        write_bvh(output, clip)
+        write_bvh(output, clip if character is None else character.in_own_units(clip))
         return
     from ..io.files import atomic_output
 
@@ -78,7 +78,7 @@ def encode_dance(suffix: str, clip, character) -> bytes:
     if suffix == ".bvh":
         from ..io.bvh import format_bvh
 
-        return format_bvh(clip).encode("utf-8")
+        return format_bvh(clip if character is None else character.in_own_units(clip)).encode("utf-8")
     if suffix in (".glb", ".fbx"):
         glb = _glb(clip, character)
         if suffix == ".glb":

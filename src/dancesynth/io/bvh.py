@@ -9,10 +9,13 @@ Conventions of the returned clip (see ``dancesynth.types``):
 
 - BVH rotation channels are intrinsic rotations in listed order, so the channels
   ``Zrotation Xrotation Yrotation`` become ``rotations.from_euler(angles, "ZXY")``.
-- The root's OFFSET is folded into ``root_pos`` (root world position = OFFSET +
-  channel values) and ``skeleton.offsets[0]`` is zero: Blender ignores the root
-  OFFSET and three.js adds it, so a file we write with a zero root OFFSET means
-  the same thing to both.
+- The root's position channels are read as the tools that wrote the file meant them
+  (``root_channels_absolute``): absolute (Blender, Mixamo and MotionBuilder write the
+  rest position as the OFFSET and the absolute position in the channels, and Blender
+  reads them so) or added to the OFFSET (iClone writes channels relative to it, and
+  three.js always adds); the OFFSET is folded into ``root_pos`` and
+  ``skeleton.offsets[0]`` is zero, so a file we write (a zero root OFFSET) means the
+  same to every reader. ``meta["root_channels"]`` says which reading was taken.
 - Non-root joints with position channels get ``local_pos`` = OFFSET + channel
   values (for every joint, so ``kinematics.fk`` can use it directly); otherwise
   ``local_pos`` is ``None``.
@@ -408,6 +411,19 @@ def _fps_from_frame_time(frame_time: float, text: str) -> float:
     return fps
 
 
+def root_channels_absolute(offset: np.ndarray, channels: dict) -> bool:
+    """Whether the root's position ``channels`` (axis -> values over frames) are absolute positions, not
+    additions to its ``offset``: the reading under which they stay nearer the rest position (on a tie,
+    added, BVH's textbook reading). A file whose root OFFSET is zero on those axes reads the same either
+    way (True)."""
+    axes = [a for a in channels if abs(offset[a]) > 1e-9]
+    if not axes or not len(next(iter(channels.values()))):
+        return True
+    as_absolute = sum(float(np.median(np.abs(channels[a] - offset[a]))) for a in axes)
+    as_added = sum(float(np.median(np.abs(channels[a]))) for a in axes)
+    return as_absolute < as_added
+
+
 def _build_clip(raw: _Raw, name: str, *, to_metres: bool, units, drop_tpose: bool) -> MotionClip:
     n_j = len(raw.names)
     offsets = np.array(raw.offsets, dtype=np.float64).reshape(n_j, 3)
@@ -416,6 +432,10 @@ def _build_clip(raw: _Raw, name: str, *, to_metres: bool, units, drop_tpose: boo
     n_f = values.shape[0]
 
     root_pos = np.repeat(offsets[:1], n_f, axis=0)
+    root_cols = np.cumsum([0] + [len(c) for c in raw.channels])[0] + np.arange(len(raw.channels[0]))
+    root_axes = [(POSITION_CHANNELS.index(c), int(col)) for c, col in zip(raw.channels[0], root_cols)
+                 if c in POSITION_CHANNELS]
+    absolute = root_channels_absolute(offsets[0], {axis: values[:, col] for axis, col in root_axes})
     local_rot = np.empty((n_f, n_j, 4))
     local_pos = None
     col = 0
@@ -426,7 +446,7 @@ def _build_clip(raw: _Raw, name: str, *, to_metres: bool, units, drop_tpose: boo
             if c in POSITION_CHANNELS:
                 axis = POSITION_CHANNELS.index(c)
                 if j == 0:
-                    root_pos[:, axis] += values[:, col]
+                    root_pos[:, axis] = values[:, col] + (0.0 if absolute else offsets[0, axis])
                 else:
                     if local_pos is None:
                         local_pos = np.broadcast_to(offsets, (n_f, n_j, 3)).copy()
@@ -470,5 +490,6 @@ def _build_clip(raw: _Raw, name: str, *, to_metres: bool, units, drop_tpose: boo
         "metres_per_unit": scale,
         "in_metres": bool(to_metres),
         "dropped_tpose": dropped,
+        "root_channels": "absolute" if absolute else "added to the OFFSET",
     })
     return clip

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..rotations import IDENTITY
-from ..types import Skeleton
+from ..types import MotionClip, Skeleton
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,6 +61,12 @@ class Character:
     armature: np.ndarray = field(default_factory=lambda: np.eye(4))
     kind: str = "builtin"     # "builtin" | "bvh" | "gltf" | "vrm0" | "vrm1"
     ankle_ground: float | None = None   # ankles' height when standing on the floor; None: as in the rest pose
+    metres_per_unit: float = 1.0        # the lengths of the character's own file (a BVH rig in cm: 0.01)
+
+    def in_own_units(self, clip: MotionClip) -> MotionClip:
+        """``clip`` (on this character, in metres) in the lengths of the character's file: a BVH rig in
+        centimetres gets its dance back in centimetres (glTF and VRM are metres by definition)."""
+        return clip.scaled(1.0 / self.metres_per_unit)
 
 
 DEFAULT_CHARACTER = "mannequin"
@@ -156,4 +162,5 @@ def _bvh_character(path: Path, overrides) -> Character:
     ankles = pos[:, [bones["leftFoot"], bones["rightFoot"]], 1].min(axis=1)
     sk = clip.skeleton
     return Character(path.stem, sk, bones, np.tile(IDENTITY, (sk.n_joints, 1)), sk.offsets[0].copy(),
-                     source=path, kind="bvh", ankle_ground=float(np.percentile(ankles, 1.0)))
+                     source=path, kind="bvh", ankle_ground=float(np.percentile(ankles, 1.0)),
+                     metres_per_unit=float(clip.meta.get("metres_per_unit", 1.0)))
