@@ -199,15 +199,15 @@ def build_db(source, output, beats, snap, manifest):
               help="Motifs of this database (built once and cached; default: the shipped motifs).")
 def motifs(dance_path, genre, json_path, plot_path, database):
     """Print a dance's motif sequence (at its kinematic beats) and its signature vs. its genre template."""
+    from .eval.rigs import genre_motifs
     from .io.bvh import read_bvh
-    from .motion.motifs import dance_motifs, load_motif_model
+    from .motion.database import open_database
+    from .motion.motifs import load_motif_model
 
     writable(json_path, plot_path)
-    if database is not None:
-        from .motion.database import open_database
-
-        database = open_database(database)
-    result = dance_motifs(read_bvh(dance_path), load_motif_model(database), genre=genre)
+    db = open_database(database)
+    # Read on each genre's own skeleton, so the answer does not depend on the rig the dance was written on.
+    result = genre_motifs(read_bvh(dance_path), load_motif_model(None if database is None else db), db, genre=genre)
     guess = " (nearest template; --genre to choose)" if result["genre_guessed"] else ""
     click.echo(f"{dance_path}: {result['duration_s']:.1f} s, {len(result['words'])} motion words, "
                f"{result['k']} motifs")

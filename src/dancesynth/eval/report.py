@@ -45,11 +45,17 @@ def _pick_mocap(dance: MotionClip, music: MusicFeatures, style: str | None, repo
     name = style or (report or {}).get("style")
     if name:
         candidates = db.styles_of(name)  # raises InputError naming the choices
-    else:
+    else:   # a style on the dance's own skeleton; else any, for a humanoid (read on its rig: eval.rigs)
         joints = set(dance.skeleton.names)
         candidates = [s for s in db.styles.values() if set(s.skeleton.names) == joints]
         if not candidates:
-            return None
+            from ..retarget.humanoid import find_bones
+
+            try:
+                find_bones(dance.skeleton)
+            except InputError:
+                return None
+            candidates = [s for s in db.styles.values() if s.captured_s >= 120.0] or list(db.styles.values())
     tempo = music.tempo_bpm if music.tempo_bpm > 0 else FALLBACK_BPM
     return min(candidates, key=lambda s: abs(np.log2(np.median(s.clip_tempo_bpm) / tempo)))
 
@@ -86,10 +92,18 @@ def evaluate_files(dance_path: Path, song_path: Path, *, reference_path: Path | 
 
 def evaluate_dance(dance: MotionClip, music: MusicFeatures, *, report: dict | None = None, style: str | None = None,
                    database=None, params: EvalParams = EvalParams(), reference: MotionClip | None = None) -> dict:
-    """``evaluate_files`` for a dance and song already in memory (``report``: ``Provenance.report()``)."""
+    """``evaluate_files`` for a dance and song already in memory (``report``: ``Provenance.report()``).
+
+    The dance (and ``reference``) is measured on the skeleton of the mocap it is compared with
+    (``eval.rigs.on_rig_of``): the same dance gives the same numbers whichever rig it was written on."""
     from dataclasses import asdict
 
+    from .rigs import on_rig_of
+
     mocap = _pick_mocap(dance, music, style, report, database)
+    if mocap is not None:
+        dance = on_rig_of(dance, mocap)
+        reference = None if reference is None else on_rig_of(reference, mocap)
 
     def reference_of(clip):
         return None if mocap is None else _style_reference(mocap, clip.fps)

@@ -59,7 +59,7 @@ class Character:
     source: Path | None = None
     nodes: tuple[int, ...] | None = None
     armature: np.ndarray = field(default_factory=lambda: np.eye(4))
-    kind: str = "builtin"     # "builtin" | "bvh" | "gltf" | "vrm0" | "vrm1"
+    kind: str = "builtin"     # "builtin" | "bvh" | "gltf" | "vrm0" | "vrm1" | "source" | "rig"
     ankle_ground: float | None = None   # ankles' height when standing on the floor; None: as in the rest pose
     metres_per_unit: float = 1.0        # the lengths of the character's own file (a BVH rig in cm: 0.01)
 
@@ -153,14 +153,22 @@ def _bvh_character(path: Path, overrides) -> Character:
     """A BVH rig: its offsets and names; its rest pose is the zero rotation. The floor is where its
     own frames stand (a BVH's rest pose says nothing about where the floor is)."""
     from ..io.bvh import read_bvh
+
+    clip = read_bvh(path)
+    return replace(rig_character(clip, overrides, what=path.name), name=path.stem, source=path, kind="bvh",
+                   metres_per_unit=float(clip.meta.get("metres_per_unit", 1.0)))
+
+
+def rig_character(clip: MotionClip, overrides=None, *, what: str = "the rig") -> Character:
+    """The skeleton of ``clip`` as a character: its offsets and names, the zero rotation as its rest pose,
+    its floor where the clip's frames stand. A BVH rig, or a database style's skeleton (``clip`` one of
+    its takes): what analyses retarget a dance onto, to read it as that mocap is read."""
     from ..kinematics import clip_fk
     from .humanoid import find_bones
 
-    clip = read_bvh(path)
-    bones = find_bones(clip.skeleton, overrides, what=path.name)
+    bones = find_bones(clip.skeleton, overrides, what=what)
     _, pos = clip_fk(clip)
     ankles = pos[:, [bones["leftFoot"], bones["rightFoot"]], 1].min(axis=1)
     sk = clip.skeleton
-    return Character(path.stem, sk, bones, np.tile(IDENTITY, (sk.n_joints, 1)), sk.offsets[0].copy(),
-                     source=path, kind="bvh", ankle_ground=float(np.percentile(ankles, 1.0)),
-                     metres_per_unit=float(clip.meta.get("metres_per_unit", 1.0)))
+    return Character("rig", sk, bones, np.tile(IDENTITY, (sk.n_joints, 1)), sk.offsets[0].copy(), kind="rig",
+                     ankle_ground=float(np.percentile(ankles, 1.0)))
