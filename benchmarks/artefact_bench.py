@@ -1,7 +1,7 @@
 """Visible artefacts of rendered dances, per engine, against the style's own mocap.
 
     python benchmarks/artefact_bench.py [--songs A.ogg B.ogg] [--engines streaming global signature]
-                                        [--mix-s 600] [--styles pop-109-124bpm mj] [--src SRC] [--before OLD.json]
+                                        [--mix-s 600] [--styles pop-106-124bpm mj] [--src SRC] [--before OLD.json]
                                         [--out benchmarks/results/artefact_bench.json]
 
 For every bundled song (and a ``--mix-s`` long mix of them, looped with ffmpeg) and

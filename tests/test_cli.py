@@ -71,7 +71,7 @@ def test_dance_on_a_bundled_song_writes_a_bvh_and_a_summary(tmp_path, out):
 def test_styles_lists_the_bundled_styles():
     proc = run("styles")
     assert proc.returncode == 0, proc.stderr
-    for name in ("salsa", "pop-82-103bpm", "pop-109-124bpm", "indian"):
+    for name in ("salsa", "pop-82-103bpm", "pop-106-124bpm", "indian"):
         assert name in proc.stdout
     assert "jpop" not in proc.stdout          # the Perfume clips are not ours to redistribute
 
