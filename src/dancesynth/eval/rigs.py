@@ -11,10 +11,21 @@ humanoid mapping, ``retarget``) before it is measured: a dance already on it is 
 
 from __future__ import annotations
 
+import hashlib
+import json
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
 from ..errors import DanceSynthError
+from ..io.files import cache_dir
+from ..motion.motifs import dance_motifs
+from ..motion.words import landmark_indices
+from ..retarget.character import rig_character
+from ..retarget.solve import retarget
 from ..types import MotionClip
 
-_RIGS: dict = {}   # style -> its rig as a character (a few FK passes over a take: once per style)
 GUESS_MIN_S = 120.0  # a genre needs this much captured dance to be guessed (the style chooser's 2 minutes)
 
 
@@ -22,26 +33,26 @@ def on_rig_of(dance: MotionClip, style) -> MotionClip:
     """``dance`` on ``style``'s skeleton (``dance`` itself when it is on it already)."""
     if tuple(dance.skeleton.names) == tuple(style.skeleton.names):
         return dance
-    from ..retarget.character import rig_character
-    from ..retarget.solve import retarget
-
-    key = (style.name, style.fingerprint)
-    if key not in _RIGS:
-        if len(_RIGS) > 8:
-            _RIGS.clear()
-        _RIGS[key] = rig_character(style.clip(0), what=f"style {style.name}")
-    moved = retarget(dance, _RIGS[key])
+    moved = retarget(dance, _rig(style))
     moved.meta = {**dance.meta, "analysed_on": style.name}
     return moved
+
+
+@lru_cache(maxsize=8)
+def _rig(style):
+    """``style``'s rig as a character (a few FK passes over a take: once per style)."""
+    return rig_character(style.clip(0), what=f"style {style.name}")
+
+
+def _largest(database, genre: str):
+    """The genre's style with the most frames: the skeleton its template is read on."""
+    return max(database.styles_of(genre), key=lambda s: s.n_frames)
 
 
 def genre_motifs(dance: MotionClip, model, database, genre: str | None = None) -> dict:
     """``motion.motifs.dance_motifs`` of ``dance`` against ``genre``'s template (the nearest one when none
     is named), with its chi2 to every genre's: each measured on that genre's skeleton (its largest
     style's), the dance read on it."""
-    from ..motion.motifs import dance_motifs
-    from ..motion.words import landmark_indices
-
     landmark_indices(dance.skeleton)   # a skeleton without legs, arms or head: the motion words' own error
     if genre is not None:
         model.check_genre(genre)
@@ -50,8 +61,7 @@ def genre_motifs(dance: MotionClip, model, database, genre: str | None = None) -
         genres.append(genre)
     results = {}
     for g in genres:
-        style = max(database.styles_of(g), key=lambda s: s.n_frames)
-        results[g] = dance_motifs(on_rig_of(dance, style), model, genre=g)
+        results[g] = dance_motifs(on_rig_of(dance, _largest(database, g)), model, genre=g)
     # A guess among the genres with material enough for a template to mean something (a 30-second genre's
     # template, from one or three takes, is near anything; any, where none has), each chi2 over the typical
     # one of that genre's own takes: a broad template (pop's many routines) is near more dances, and the
@@ -62,7 +72,7 @@ def genre_motifs(dance: MotionClip, model, database, genre: str | None = None) -
     out = dict(results[chosen])
     out["chi2_by_genre"] = {**out["chi2_by_genre"], **{g: r["chi2"] for g, r in results.items()}}
     out["genre_guessed"] = genre is None
-    out["read_on"] = max(database.styles_of(chosen), key=lambda s: s.n_frames).name
+    out["read_on"] = _largest(database, chosen).name
     if typical:
         out["chi2_over_own_takes"] = {g: round(results[g]["chi2"] / max(typical[g], 1e-3), 4) for g in typical}
     return out
@@ -72,15 +82,6 @@ def genre_baselines(model, database, genres) -> dict[str, float]:
     """Per genre of ``genres``: the median chi2 to its template of its own captured takes (of 10 s or more),
     each read as a dance is (``dance_motifs``, at its kinematic beats). Cached on disk by the model and
     the styles' contents."""
-    import hashlib
-    import json
-    from pathlib import Path
-
-    import numpy as np
-
-    from ..io.files import cache_dir
-    from ..motion.motifs import dance_motifs
-
     h = hashlib.blake2b(model.fingerprint().encode(), digest_size=12)
     for g in sorted(genres):
         for st in database.styles_of(g):

@@ -432,8 +432,7 @@ def _build_clip(raw: _Raw, name: str, *, to_metres: bool, units, drop_tpose: boo
     n_f = values.shape[0]
 
     root_pos = np.repeat(offsets[:1], n_f, axis=0)
-    root_cols = np.cumsum([0] + [len(c) for c in raw.channels])[0] + np.arange(len(raw.channels[0]))
-    root_axes = [(POSITION_CHANNELS.index(c), int(col)) for c, col in zip(raw.channels[0], root_cols)
+    root_axes = [(POSITION_CHANNELS.index(c), col) for col, c in enumerate(raw.channels[0])   # the root's columns come first
                  if c in POSITION_CHANNELS]
     absolute = root_channels_absolute(offsets[0], {axis: values[:, col] for axis, col in root_axes})
     local_rot = np.empty((n_f, n_j, 4))
