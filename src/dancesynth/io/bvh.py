@@ -432,8 +432,8 @@ def _build_clip(raw: _Raw, name: str, *, to_metres: bool, units, drop_tpose: boo
     n_f = values.shape[0]
 
     root_pos = np.repeat(offsets[:1], n_f, axis=0)
-    root_axes = [(POSITION_CHANNELS.index(c), col) for col, c in enumerate(raw.channels[0])   # the root's columns come first
-                 if c in POSITION_CHANNELS]
+    # The root's channels are the first columns of a frame.
+    root_axes = [(POSITION_CHANNELS.index(c), col) for col, c in enumerate(raw.channels[0]) if c in POSITION_CHANNELS]
     absolute = root_channels_absolute(offsets[0], {axis: values[:, col] for axis, col in root_axes})
     local_rot = np.empty((n_f, n_j, 4))
     local_pos = None
