@@ -25,7 +25,17 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..api import dance
+from ..engines.beatgrid import MIN_MATERIAL_MINUTES, tempo_map
+from ..errors import InputError
+from ..eval.evaluate import mocap_reference
+from ..eval.repetition import repetition
+from ..motion.catalog import list_styles
+from .accents import _mocap_evaluate, _score
+from .accents import _songs as accent_songs
 from .common import BenchConfig, Progress
+from .groundtruth import SongSpec, song_specs
+from .quality import at_fps, mocap_scores
 
 #: Tempi of the 3-minute songs of each split (odd ones in 3/4), and the first seed.
 LONG_SONGS = {"test": ((72, 88, 104, 118, 126, 138, 146, 164, 172, 178), 100),
@@ -36,9 +46,6 @@ TEMPO_COVER_MINUTES = 5.0      # ... this much material at some level
 
 def long_specs(split: str, count: int, duration_s: float) -> list:
     """The generated long songs of a split: ``count`` of them, alternately 4/4 and 3/4, with pickups."""
-    from ..errors import InputError
-    from .groundtruth import SongSpec
-
     if split not in LONG_SONGS:
         raise InputError(f"vocabulary split {split!r}: use one of {', '.join(LONG_SONGS)}")
     tempi, seed = LONG_SONGS[split]
@@ -68,12 +75,8 @@ def totals(genres: dict, rows: list[dict]) -> dict:
 
 
 def _songs(cfg: BenchConfig, progress) -> list[dict]:
-    from .accents import _songs as accent_songs
-
     specs = list(cfg.groundtruth_specs) if cfg.groundtruth_specs else None
     if specs is None:
-        from .groundtruth import song_specs
-
         specs = song_specs(quick=cfg.groundtruth_quick)
     specs += long_specs(cfg.vocabulary_split, cfg.vocabulary_long_songs, cfg.vocabulary_long_s)
     return accent_songs(replace(cfg, groundtruth_specs=tuple(specs)), progress)
@@ -81,15 +84,11 @@ def _songs(cfg: BenchConfig, progress) -> list[dict]:
 
 def _strict(sources: tuple) -> float:
     """The replayed share with a take's mirror image counted as the take itself."""
-    from ..eval.repetition import repetition
-
     ids = [(s["clip"].removesuffix(" (mirrored)"), s["source_position"]) for s in sources]
     return repetition(ids, [s["time_s"] for s in sources])["replayed_share"] if ids else 0.0
 
 
 def dance_song(song: dict, db, style: str | None = None) -> tuple:
-    from ..api import dance
-
     clip = dance(song["music"], database=db, style=style)
     s = clip.provenance.summary
     rep = s["repetition"]
@@ -105,10 +104,6 @@ def dance_song(song: dict, db, style: str | None = None) -> tuple:
 
 def guards(db, danced: list[tuple], progress=None) -> dict:
     """Per style: the mean accent scores and guards of its dances, and its captured takes' own numbers."""
-    from ..eval.evaluate import mocap_reference
-    from .accents import _mocap_evaluate, _score
-    from .quality import at_fps, mocap_scores
-
     by_style: dict = {}
     for clip, row, song in danced:
         by_style.setdefault(row["style"], []).append((clip, song))
@@ -125,33 +120,27 @@ def guards(db, danced: list[tuple], progress=None) -> dict:
         scores = [_score(clip, song, ref, danced_from, sources) for clip, song in items]
         mocap = mocap_scores(_mocap_evaluate, clips, None)["mean"]
 
-        def mean(key, rows=scores):
-            vals = [r[key] for r in rows if r.get(key) is not None and np.isfinite(r[key])]
-            return float(np.mean(vals)) if vals else None
-
-        def worst(key, pick):
+        def over(key, pick=np.mean):
+            """``pick`` (the mean) of ``key`` over the dances that have it."""
             vals = [r[key] for r in scores if r.get(key) is not None and np.isfinite(r[key])]
             return float(pick(vals)) if vals else None
 
-        out[name] = {"dances": len(items), "accent_precision_x_chance": mean("accent_precision_x_chance"),
-                     "accent_recall_x_chance": mean("accent_recall_x_chance"),
+        out[name] = {"dances": len(items), "accent_precision_x_chance": over("accent_precision_x_chance"),
+                     "accent_recall_x_chance": over("accent_recall_x_chance"),
                      "min_accent_x_chance": min(min(r["accent_precision_x_chance"], r["accent_recall_x_chance"])
                                                 for r in scores),
                      "one_frame_steps": int(sum(r.get("one_frame_steps") or 0 for r in scores)),
-                     "foot_skate_m_s": mean("foot_skate_m_s"), "mocap_foot_skate_m_s": mocap.get("foot_skate_m_s"),
-                     "foot_skate_vs_mocap": mean("foot_skate_vs_mocap"),
-                     "worst_foot_skate_vs_mocap": worst("foot_skate_vs_mocap", max),
-                     "joint_speed_p99_vs_mocap": mean("joint_speed_p99_vs_mocap"),
-                     "worst_joint_speed_p99_vs_mocap": worst("joint_speed_p99_vs_mocap",
-                                                             lambda v: max(v, key=lambda x: abs(x - 1.0))),
-                     "root_travel_vs_mocap": mean("root_travel_vs_mocap")}
+                     "foot_skate_m_s": over("foot_skate_m_s"), "mocap_foot_skate_m_s": mocap.get("foot_skate_m_s"),
+                     "foot_skate_vs_mocap": over("foot_skate_vs_mocap"),
+                     "worst_foot_skate_vs_mocap": over("foot_skate_vs_mocap", max),
+                     "joint_speed_p99_vs_mocap": over("joint_speed_p99_vs_mocap"),
+                     "worst_joint_speed_p99_vs_mocap": over("joint_speed_p99_vs_mocap",
+                                                            lambda v: max(v, key=lambda x: abs(x - 1.0))),
+                     "root_travel_vs_mocap": over("root_travel_vs_mocap")}
     return out
 
 
 def vocabulary(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
-    from ..engines.beatgrid import MIN_MATERIAL_MINUTES, tempo_map
-    from ..motion.catalog import list_styles
-
     rows = list_styles(db)
     genres = genre_minutes(rows)
     res = {"split": cfg.vocabulary_split, "genres": genres, "totals": totals(genres, rows)}

@@ -35,6 +35,7 @@ from ..types import MotionClip, Skeleton
 from . import beats as motion_beats
 from .catalog import BUNDLED_DATABASE, FORMAT_VERSION  # noqa: F401  (also imported from here)
 from .features import foot_contacts, foot_points, kinetic_energy
+from .mirror import mirror_motion, mirror_pairs, symmetry_error
 from .resample import resample_clip_arrays
 from .roles import bone_masses, find_roles
 
@@ -112,8 +113,6 @@ class Style:
         read the style itself, whose clips are all captured."""
         if not self.mirror or self.n_mirrored:
             return self
-        from .mirror import mirror_motion
-
         rot, pos, contacts = mirror_motion(self.skeleton, self.local_rot, self.root_pos, self.contacts)
         n = self.n_frames
         return Style(self.name, self.genre, self.skeleton, self.fps,
@@ -460,7 +459,8 @@ def build_database(sources: Iterable[tuple[str, Path]], config: AnalysisConfig =
         for name, part in _split_by_tempo(base, analysed, width, config.min_style_minutes).items():
             styles[name] = _style_from(name, genre, canon, fps, part)
             if genre in mirror:
-                styles[name].mirror = _check_mirrorable(styles[name])
+                _check_mirrorable(styles[name])
+                styles[name].mirror = True
     if not styles:
         raise InputError(f"no clip had at least {config.min_beats_per_clip} motion beats: the database "
                          "needs dance clips several seconds long")
@@ -472,9 +472,8 @@ def build_database(sources: Iterable[tuple[str, Path]], config: AnalysisConfig =
 MIRROR_TOLERANCE = 0.05
 
 
-def _check_mirrorable(style: Style) -> bool:
-    from .mirror import mirror_pairs, symmetry_error
-
+def _check_mirrorable(style: Style) -> None:
+    """An ``InputError`` unless the style's skeleton has left/right pairs and is near symmetric."""
     sk = style.skeleton
     if np.all(mirror_pairs(sk) == np.arange(sk.n_joints)):
         raise InputError(f"style '{style.name}' cannot be mirrored: its joint names have no left/right pairs; "
@@ -483,7 +482,6 @@ def _check_mirrorable(style: Style) -> bool:
     if err > MIRROR_TOLERANCE * leg:
         raise InputError(f"style '{style.name}' cannot be mirrored: its left and right bones differ by up to "
                          f"{err:.3g} (leg length {leg:.3g}); leave its genre out of the manifest's [mirror] table")
-    return True
 
 
 def _consistent_metre(analysed: list, config: AnalysisConfig) -> list:
