@@ -459,8 +459,7 @@ def build_database(sources: Iterable[tuple[str, Path]], config: AnalysisConfig =
         for name, part in _split_by_tempo(base, analysed, width, config.min_style_minutes).items():
             styles[name] = _style_from(name, genre, canon, fps, part)
             if genre in mirror:
-                _check_mirrorable(styles[name])
-                styles[name].mirror = True
+                styles[name].mirror = _check_mirrorable(styles[name])
     if not styles:
         raise InputError(f"no clip had at least {config.min_beats_per_clip} motion beats: the database "
                          "needs dance clips several seconds long")
@@ -472,8 +471,8 @@ def build_database(sources: Iterable[tuple[str, Path]], config: AnalysisConfig =
 MIRROR_TOLERANCE = 0.05
 
 
-def _check_mirrorable(style: Style) -> None:
-    """An ``InputError`` unless the style's skeleton has left/right pairs and is near symmetric."""
+def _check_mirrorable(style: Style) -> bool:
+    """True where the style's skeleton has left/right pairs and is near symmetric, else an ``InputError``."""
     sk = style.skeleton
     if np.all(mirror_pairs(sk) == np.arange(sk.n_joints)):
         raise InputError(f"style '{style.name}' cannot be mirrored: its joint names have no left/right pairs; "
@@ -482,6 +481,7 @@ def _check_mirrorable(style: Style) -> None:
     if err > MIRROR_TOLERANCE * leg:
         raise InputError(f"style '{style.name}' cannot be mirrored: its left and right bones differ by up to "
                          f"{err:.3g} (leg length {leg:.3g}); leave its genre out of the manifest's [mirror] table")
+    return True
 
 
 def _consistent_metre(analysed: list, config: AnalysisConfig) -> list:
