@@ -137,7 +137,7 @@ def _glide(style, music_s, count, ease):
 
 
 def test_accent_timing_makes_a_motion_that_never_stops_hit_every_beat():
-    from dancesynth.engines.stitch import beat_ease
+    from dancesynth.engines.timing import beat_ease
     from dancesynth.eval import motion_metrics as mm
 
     style = gliding_style()
@@ -158,7 +158,7 @@ def test_accent_timing_makes_a_motion_that_never_stops_hit_every_beat():
 
 
 def test_accent_timing_refuses_amounts_that_would_halt_or_reverse_the_motion():
-    from dancesynth.engines.stitch import beat_ease
+    from dancesynth.engines.timing import beat_ease
 
     assert beat_ease(4, np.arange(4), 4, amount=0.3, downbeat=0.3).tolist() == pytest.approx([0.6, 0.3, 0.3, 0.3])
     for amount, downbeat in ((0.8, 0.3), (-0.1, 0.0), (0.3, -0.2)):
@@ -167,7 +167,7 @@ def test_accent_timing_refuses_amounts_that_would_halt_or_reverse_the_motion():
 
 
 def test_accent_timing_hits_the_bars_first_beat_hardest_and_keeps_subdivisions_soft():
-    from dancesynth.engines.stitch import beat_ease
+    from dancesynth.engines.timing import beat_ease
     from dancesynth.eval import motion_metrics as mm
 
     style = gliding_style()

@@ -355,11 +355,11 @@ def test_fast_songs_are_not_rushed_by_the_accent_timing(bundled_db):
     (unlimited, a fast song's pieces, already warped to 1.15x, were played at up to 2.25x on a bar's "1"), and
     the joints move within 25 % of the mocap's speed (p99) with the accents still far above chance."""
     from dancesynth.bench.quality import at_fps
-    from dancesynth.engines.stitch import ease_within
+    from dancesynth.engines.timing import ease_within
     from dancesynth.eval.evaluate import evaluate, mocap_reference
     from test_engine import music
 
-    from dancesynth.engines.stitch import ease_rate
+    from dancesynth.engines.timing import ease_rate
 
     ease = np.array([0.3, 0.75, 0.3, 0.3])                      # the bar's "1" on the second beat
     for rates in ([1.0, 1.0, 1.0], [1.0, 1.4, 1.6], [0.8, 1.2, 1.0]):

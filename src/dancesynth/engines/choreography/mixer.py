@@ -30,7 +30,8 @@ from ...motion.motifs import style_motifs
 from ...motion.roles import find_roles
 from ...motion.words import MotionWords
 from ..footlock import FootLockState, lock_feet
-from ..stitch import Pieces, StitchState, beat_ease, ease_within, render
+from ..stitch import Pieces, StitchState, render
+from ..timing import beat_ease, ease_within
 
 
 @dataclass(frozen=True)
@@ -57,7 +58,7 @@ class MixerConfig:
                                    # (the foot lock never pulls a foot more than 0.1 m; beyond, it slides)
     accent_window: float = 0.35    # show each word's beats at their visible stops (motion.accents; 0 = off)
     accent: AccentCosts | None = AccentCosts()  # prefer words that stop on their beats and not between
-    ease_beats: float = 0.3        # accent timing on each music beat (engines.stitch.ease; 0 = off)
+    ease_beats: float = 0.3        # accent timing on each music beat (engines.timing.ease; 0 = off)
     ease_downbeat: float = 0.3     # ... and this much harder on each bar's first beat
     ease_max_rate: float | None = 1.7  # ... never faster between beats than this times the captured speed
 

@@ -27,7 +27,8 @@ from ...motion.database import Style
 from ...motion.roles import JointRoles, find_roles
 from ...types import DEFAULT_FPS
 from ..footlock import FootLockState, lock_feet
-from ..stitch import Pieces, Rendered, StitchState, beat_ease, ease_within, render
+from ..stitch import Pieces, Rendered, StitchState, render
+from ..timing import beat_ease, ease_within
 from .meta_graph import MetaMotionGraph
 from .search import AccentCosts, Path, StepCosts, search
 from .signature import DEFAULT_WEIGHT, SignatureTarget
@@ -83,10 +84,10 @@ class EngineConfig:
                                       # less on the others: the big moves start on the "1" (0 = paper)
     downbeat_stop: float = 0.5        # on a bar's first beat, a stop of strength s costs s x this less
     ease_beats: float = 0.3           # accent timing: play slower on each music beat, faster between
-                                      # (stitch.ease; 0 = the paper's constant rate per piece)
+                                      # (timing.ease; 0 = the paper's constant rate per piece)
     ease_downbeat: float = 0.45       # ... and this much harder on each bar's first beat
     ease_max_rate: float | None = 1.7  # ... but never faster between beats than this times the captured speed
-                                       # (stitch.ease_within; None = no limit)
+                                       # (timing.ease_within; None = no limit)
     intensity_weight: float = 8.0     # eq. (8)'s intensity match against the stop, jump and repeat costs
                                       # beyond the paper (1 = the weight they were tuned at)
 
@@ -97,7 +98,7 @@ class EngineConfig:
                    ease_beats=0.0, ease_downbeat=0.0, intensity_weight=1.0)
 
     def beat_ease(self, n: int, bar_position, beats_per_bar) -> np.ndarray:
-        """The accent timing of each of ``n`` beats (``stitch.beat_ease``)."""
+        """The accent timing of each of ``n`` beats (``timing.beat_ease``)."""
         return beat_ease(n, bar_position, beats_per_bar, amount=self.ease_beats, downbeat=self.ease_downbeat)
 
 
@@ -165,7 +166,7 @@ def pieces_from_path(graph: MetaMotionGraph, path: Path, beat_times_s: np.ndarra
                      beat_count: np.ndarray | None = None, ease: np.ndarray | None = None,
                      ease_max_rate: float | None = None) -> Pieces:
     """The path's beat pieces; ``beat_count`` and ``ease`` (K+1,) per beat as in ``Pieces``, the easing
-    kept within ``ease_max_rate`` times the captured speed (``stitch.ease_within``)."""
+    kept within ``ease_max_rate`` times the captured speed (``timing.ease_within``)."""
     f0 = graph.render_frame[path.via].astype(np.float64)
     f1 = graph.render_frame[path.nodes[1:]].astype(np.float64)
     if ease is not None:

@@ -56,7 +56,7 @@ class GraphConfig:
                                     # from (a dance that enters one loops there forever; see derive_steps)
     accent_window: float = 0.0      # render each beat at its most visible stop within this fraction of a
                                     # beat (motion.accents; 0 = the motion beats themselves, the paper).
-                                    # Off: with the renderer's accent timing (stitch.ease) it added no
+                                    # Off: with the renderer's accent timing (timing.ease) it added no
                                     # accents, and its uneven pieces cost playback rates and transitions.
 
     @classmethod
