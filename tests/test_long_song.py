@@ -14,7 +14,8 @@ import soundfile as sf
 
 from conftest import BUNDLED_MUSIC
 from dancesynth.io import audio
-from dancesynth.io.audio import load_audio, resample
+from dancesynth.io.audio import load_audio
+from dancesynth.io.resampling import resample
 from dancesynth.music import analyze_music, beat_intensity_db, onset_envelope, sounding_span
 from dancesynth.music.intensity import cumulative_energy
 from dancesynth.music.metre import frame_features

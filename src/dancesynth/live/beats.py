@@ -120,7 +120,7 @@ class StreamingBeatTracker:
                  latency_s: float = LATENCY_S):
         if sr != ANALYSIS_SR:
             raise InputError(f"the streaming beat tracker analyses audio at {ANALYSIS_SR} Hz, got sr={sr!r}; "
-                             "resample the stream first (dancesynth.io.audio.resample)")
+                             "resample the stream first (dancesynth.io.resampling.resample)")
         if not (np.isfinite(fallback_bpm) and 20.0 <= fallback_bpm <= 400.0):
             raise InputError(f"fallback tempo must be between 20 and 400 bpm, got {fallback_bpm!r}")
         if not (np.isfinite(latency_s) and 0.0 <= latency_s <= 5.0):

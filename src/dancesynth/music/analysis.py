@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io.audio import DEFAULT_MAX_DURATION_S, DEFAULT_MIN_DURATION_S, load_audio, resample
+from ..io.audio import DEFAULT_MAX_DURATION_S, DEFAULT_MIN_DURATION_S, load_audio
+from ..io.resampling import resample
 from ..types import FALLBACK_BPM, MusicFeatures
 from .beats import (DEFAULT_TRACKER, MIN_BEATS, MIN_CONFIDENCE, TRACKERS, beat_onset_db, steady_beat_grid,
                     track_beats)

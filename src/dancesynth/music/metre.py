@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
-from ..io.audio import resample_blocks
+from ..io.resampling import resample_blocks
 from .onset import ANALYSIS_SR
 
 METRES = (3, 4)
