@@ -20,7 +20,8 @@ from dancesynth.errors import InputError
 from dancesynth.export import render_video, render_video_files
 from dancesynth.export import render as render_mod
 from dancesynth.export.raster import smooth_lines, upsample
-from dancesynth.export.render import COLOURS, FrameRenderer, clip_pose
+from dancesynth.export.figure import COLOURS, clip_pose
+from dancesynth.export.render import FrameRenderer
 from dancesynth.export.skinned import SkinnedMesh, paint, rasterise
 from dancesynth.retarget.character import Character, Mesh
 from dancesynth.retarget.rigs import rig_skeleton

@@ -1,5 +1,5 @@
 """A small software renderer for dance videos: numpy projection and rasterisation, PIL for discs and thick lines
-(the pixel helpers are in ``raster``).
+(what to draw of a skeleton is in ``figure``, the camera in ``camera``, the pixel helpers in ``raster``).
 
 The scene is the dancer on a floor grid with a line every 0.5 m, seen by a perspective
 camera at a fixed elevation from a 3/4 front view. The dancer is a character's skinned
@@ -20,27 +20,18 @@ Y is up and lengths are metres, as everywhere in dancesynth.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from PIL import Image, ImageDraw
-from scipy.ndimage import gaussian_filter1d
 
-from .. import rotations as rot
-from ..errors import ModelError
-from ..kinematics import fk
-from ..motion.roles import find_roles
 from ..types import MotionClip
+from .camera import ELEVATION_DEG, FOV_Y_DEG, Camera, plan_shot
+from .figure import Figure, build_figure, clip_pose, pose_points
 from .raster import box_reduce, disc, image_planes, luma, pack, packed_image, smooth_lines, to_ycbcr, unpack, upsample
 from .skinned import rasterise
 
 SUPERSAMPLE = 2              # draw at 2x, box-filter down: cheap anti-aliasing ...
 SUPERSAMPLE_MAX_PIXELS = 1920 * 1080  # ... up to full HD; larger pictures have small enough pixels
 CHUNK_FRAMES = 64            # forward kinematics per chunk of output frames
-FOV_Y_DEG = 30.0             # vertical field of view
-ELEVATION_DEG = 12.0         # camera looks down at the dancer by this much
-AZIMUTH_DEG = 35.0           # 3/4 view: this far round from the dancer's mean facing
-FOLLOW_SIGMA_S = 0.6         # low-pass of the root path the camera follows
 GRID_STEP_M = 0.5            # floor grid spacing
 GRID_RADIUS_M = 5.0          # grid fades out at this distance from the dancer
 NEAR_M = 0.2                 # near clipping plane
@@ -53,199 +44,7 @@ GRID_MINOR = (200, 200, 202)  # every 0.5 m
 GRID_MAJOR = (172, 173, 178)  # every 1 m
 SHADOW = (206, 205, 203)
 PIX_FMTS = ("rgb24", "yuv420p")
-COLOURS = {"l": (40, 110, 210), "r": (226, 92, 46), "": (72, 78, 92)}
 HEAD = (96, 102, 116)
-
-
-@dataclass(frozen=True)
-class Figure:
-    """What to draw of a skeleton: points (joints then End Sites) and bones between them."""
-
-    end_joints: np.ndarray     # (E,) joint of each End Site
-    end_offsets: np.ndarray    # (E, 3)
-    bones: np.ndarray          # (B, 2) point indices (parent, child)
-    bone_radius: np.ndarray    # (B,) metres
-    bone_colour: np.ndarray    # (B, 3) float
-    joint_radius: np.ndarray   # (P,) metres, 0: no disc
-    joint_colour: np.ndarray   # (P, 3) float
-    head_points: np.ndarray    # points whose mean is the head's centre (empty: no head)
-    head_radius: float
-
-    @property
-    def n_points(self) -> int:
-        return len(self.joint_radius)
-
-
-def build_figure(skeleton, body_height: float | None = None) -> Figure:
-    """Choose bones, thicknesses and colours (left blue, right orange) for a skeleton.
-
-    Thicknesses scale with ``body_height`` (metres; default: the rest pose's height).
-    """
-    parents = skeleton.parents
-    end_joints = np.array(sorted(skeleton.end_sites), dtype=np.int64)
-    end_offsets = np.array([skeleton.end_sites[j] for j in end_joints]).reshape(-1, 3)
-    point_parent = np.concatenate([parents, end_joints])
-    offsets = np.vstack([skeleton.offsets, end_offsets])
-    n_p = len(point_parent)
-
-    def subtree(top):
-        inside = np.zeros(n_p, bool)
-        if top < 0:
-            return inside
-        inside[top] = True
-        for p in range(n_p):  # parents come before children; End Sites after all joints
-            if point_parent[p] >= 0 and inside[point_parent[p]]:
-                inside[p] = True
-        return inside
-
-    side = np.full(n_p, "", dtype=object)
-    head = -1
-    try:
-        roles = find_roles(skeleton)
-        head = roles.head
-        for k, s in enumerate("lr"):
-            for top in (roles.hips[k], roles.shoulders[k]):
-                side[subtree(top)] = s
-    except ModelError:
-        pass
-    if head < 0:
-        head = next((j for j, n in enumerate(skeleton.names) if "head" in n.lower()), -1)
-    in_head = subtree(head)
-    if head >= 0:
-        in_head[head] = False
-
-    if body_height is None:
-        body_height = _rest_height(skeleton, offsets, point_parent)
-    scale = max(body_height, 1e-6) / 1.7  # a 1.7 m person: scale 1
-    bones, radius, colour = [], [], []
-    for p in range(1, n_p):
-        a = int(point_parent[p])
-        length = float(np.linalg.norm(offsets[p]))
-        if a < 0 or in_head[p] or length < 1e-3 * scale:
-            continue
-        r = float(np.clip(0.1 * length, 0.007 * scale, 0.03 * scale))
-        if side[p] == "":
-            r *= 1.3
-        bones.append((a, p))
-        radius.append(r)
-        colour.append(COLOURS[side[p]])
-    bones = np.array(bones, dtype=np.int64).reshape(-1, 2)
-    radius = np.array(radius, dtype=np.float64)
-    joint_radius = np.zeros(n_p)
-    for (a, b), r in zip(bones, radius):
-        joint_radius[a] = max(joint_radius[a], 1.2 * r)
-        joint_radius[b] = max(joint_radius[b], 1.2 * r)
-    joint_radius[joint_radius < 0.014 * scale] = 0.0  # no beads on fingers
-    joint_colour = np.array([COLOURS[s] for s in side], dtype=np.float64) * 0.7
-    head_points = np.flatnonzero(subtree(head)) if head >= 0 else np.zeros(0, np.int64)
-    return Figure(end_joints, end_offsets, bones, radius, np.array(colour, np.float64).reshape(-1, 3),
-                  joint_radius, joint_colour, head_points, 0.1 * scale)
-
-
-def _rest_height(skeleton, offsets, point_parent) -> float:
-    pos = np.zeros((len(point_parent), 3))
-    for p in range(1, len(point_parent)):
-        pos[p] = pos[point_parent[p]] + offsets[p]
-    return float(np.ptp(pos[:, 1])) if len(pos) > 1 else 1.0
-
-
-def clip_pose(clip: MotionClip, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Global joint rotations (len(frames), J, 4) and positions (len(frames), J, 3) of the given frames."""
-    sk = clip.skeleton
-    local_pos = None if clip.local_pos is None else clip.local_pos[frames]
-    return fk(clip.local_rot[frames], clip.root_pos[frames], sk.offsets, sk.parents, local_pos)
-
-
-def pose_points(g_rot: np.ndarray, g_pos: np.ndarray, fig: Figure) -> np.ndarray:
-    """World positions (..., P, 3) of joints and End Sites, from global joint rotations and positions."""
-    if len(fig.end_joints) == 0:
-        return g_pos
-    ends = g_pos[..., fig.end_joints, :] + rot.apply(g_rot[..., fig.end_joints, :], fig.end_offsets)
-    return np.concatenate([g_pos, ends], axis=-2)
-
-
-def figure_points(clip: MotionClip, fig: Figure, frames: np.ndarray) -> np.ndarray:
-    """World positions (len(frames), P, 3) of joints and End Sites of the given frames."""
-    return pose_points(*clip_pose(clip, frames), fig)
-
-
-@dataclass(frozen=True)
-class Camera:
-    """A pinhole camera; ``project`` maps world points to output pixels (at the drawing scale)."""
-
-    position: np.ndarray   # (3,)
-    right: np.ndarray      # (3,)
-    up: np.ndarray         # (3,)
-    back: np.ndarray       # (3,) from the target towards the camera
-    focal_px: float
-    centre: tuple[float, float]
-
-    def to_camera(self, p):
-        d = np.asarray(p, dtype=np.float64) - self.position
-        return np.stack([d @ self.right, d @ self.up, -(d @ self.back)], axis=-1)
-
-    def to_pixels(self, c):
-        depth = np.maximum(c[..., 2], 1e-9)
-        u = self.centre[0] + self.focal_px * c[..., 0] / depth
-        v = self.centre[1] - self.focal_px * c[..., 1] / depth
-        return np.stack([u, v], axis=-1)
-
-
-@dataclass(frozen=True)
-class Shot:
-    """Camera placement for a whole clip: fixed direction, target following the root."""
-
-    target_xz: np.ndarray   # (F, 2) low-passed root path
-    target_y: float
-    floor_y: float
-    direction: np.ndarray   # (3,) unit, target -> camera
-    distance: float
-    body_height: float
-
-
-def plan_shot(clip: MotionClip, fig: Figure, aspect: float, body=None) -> Shot:
-    """Floor height, body size, mean facing and the smoothed path the camera follows.
-
-    ``body(g_rot, g_pos)``: the points (F, P, 3) whose extent is the body (default: the
-    figure's joints and End Sites), e.g. a skinned mesh's vertices, whose soles stand below the ankles.
-    """
-    n = clip.n_frames
-    sample = np.unique(np.linspace(0, n - 1, min(n, 240)).astype(np.int64))
-    g_rot, g_pos = clip_pose(clip, sample)
-    pts = pose_points(g_rot, g_pos, fig)
-    extent = pts if body is None else body(g_rot, g_pos)
-    lowest = extent[..., 1].min(axis=1)
-    floor_y = float(np.percentile(lowest, 5))
-    height = float(np.median(extent[..., 1].max(axis=1) - lowest))
-    height = height if np.isfinite(height) and height > 1e-3 else 1.7
-    forward = _mean_facing(clip, sample, pts)
-    left = np.cross([0.0, 1.0, 0.0], forward)
-    az, el = np.radians(AZIMUTH_DEG), np.radians(ELEVATION_DEG)
-    horizontal = np.cos(az) * forward + np.sin(az) * left
-    direction = np.cos(el) * horizontal + np.array([0.0, np.sin(el), 0.0])
-    # Frame about 1.6 body heights vertically (raised arms, the floor under the feet).
-    half_extent = max(0.78 * height, 0.5 * height / max(aspect, 1e-3))
-    distance = half_extent / np.tan(np.radians(FOV_Y_DEG) / 2) + 0.3 * height
-    xz = clip.root_pos[:, [0, 2]]
-    sigma = FOLLOW_SIGMA_S * clip.fps
-    target = gaussian_filter1d(xz, sigma, axis=0, mode="nearest") if n > 1 else xz.copy()
-    return Shot(target, floor_y + 0.5 * height, floor_y, direction, float(distance), height)
-
-
-def _mean_facing(clip, sample, pts) -> np.ndarray:
-    """Mean horizontal facing, from the hips (left hip minus right hip, crossed with up)."""
-    try:
-        roles = find_roles(clip.skeleton)
-        across = pts[:, roles.hips[0]] - pts[:, roles.hips[1]]
-        fwd = np.cross(across, [0.0, 1.0, 0.0])
-    except ModelError:
-        fwd = rot.apply(clip.local_rot[sample, 0], np.array([0.0, 0.0, 1.0]))
-    fwd[:, 1] = 0.0
-    norm = np.linalg.norm(fwd, axis=1, keepdims=True)
-    mean = (fwd / np.maximum(norm, 1e-9))[norm[:, 0] > 1e-9].sum(axis=0)
-    if not np.isfinite(mean).all() or np.linalg.norm(mean) < 1e-6:
-        return np.array([0.0, 0.0, 1.0])
-    return mean / np.linalg.norm(mean)
 
 
 class FrameRenderer:
@@ -361,7 +160,7 @@ class FrameRenderer:
 
     def draw(self, frame: int, points: np.ndarray, posed=None) -> Image.Image:
         """One frame as an RGB image of the output size (an ``rgb24`` renderer's); ``points`` (P, 3) from
-        ``figure_points``; ``posed``: the mesh's frame from ``SkinnedMesh.pose`` (``None``: the stick figure)."""
+        ``figure.figure_points``; ``posed``: the mesh's frame from ``SkinnedMesh.pose`` (``None``: the stick figure)."""
         if self.pix_fmt != "rgb24":
             raise ValueError("draw() makes RGB pictures: use a renderer with pix_fmt='rgb24'")
         return self._rgb(*self._render(frame, points, posed, self.floor))

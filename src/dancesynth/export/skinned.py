@@ -156,7 +156,7 @@ class SkinnedMesh:
         coordinates, 1/depth and light (V,) float32; NaN for a vertex nearer than ``near``.
 
         ``g_rot`` (F, J, 4), ``g_pos`` (F, J, 3): the frames' global joint rotations and positions;
-        ``cameras``: each frame's ``render.Camera`` (all of one orientation); nothing nearer than ``near``."""
+        ``cameras``: each frame's ``camera.Camera`` (all of one orientation); nothing nearer than ``near``."""
         pos, nrm = self.skin(g_rot, g_pos)
         cam = cameras[0]
         pos -= np.stack([c.position for c in cameras]).astype(np.float32)[:, :, None]
@@ -178,7 +178,7 @@ class SkinnedMesh:
                 + KEY * np.maximum(_along(nrm, key), 0.0) + FILL * np.maximum(_along(nrm, fill), 0.0))
 
     def shadow_radii(self, rest_points: np.ndarray, bones: np.ndarray) -> np.ndarray:
-        """How thick (radius, m) each bone (parent joint, child point) of a ``render.Figure`` is in the mesh:
+        """How thick (radius, m) each bone (parent joint, child point) of a ``figure.Figure`` is in the mesh:
         a percentile of the distance to the bone of the vertices its parent joint moves most (0: none)."""
         owner = self.joints[np.arange(len(self.joints)), self.weights.argmax(axis=1)]
         radius = np.zeros(len(bones))
