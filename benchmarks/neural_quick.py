@@ -31,8 +31,8 @@ def main(argv=None) -> int:
 
     from dancesynth.api import analyse, dance
     from dancesynth.bench.common import MUSIC_DIR
-    from dancesynth.bench.structure import (GENRE, _chi2_ids, found_motifs, held_out_database, liveliness,
-                                            plan_followed)
+    from dancesynth.bench.dances import GENRE, found_motifs, liveliness, plan_followed
+    from dancesynth.bench.structure import _chi2_ids, held_out_database
     from dancesynth.engines.neural.store import find_model, load_model
     from dancesynth.eval.realism import realism_scores, window_features
     from dancesynth.eval.realism_features import GEOMETRIC_FEATURES

@@ -14,7 +14,7 @@ from dancesynth.engines.choreography.mixer import MixerConfig, substitute_motifs
 from dancesynth.errors import InputError
 from dancesynth.eval import motion_metrics as mm
 from dancesynth.bench.quality import at_fps
-from dancesynth.bench.structure import found_motifs
+from dancesynth.bench.dances import found_motifs
 from dancesynth.eval.evaluate import evaluate, mocap_reference
 from dancesynth.io.bvh import read_bvh, write_bvh
 from dancesynth.motion.database import MotionDatabase

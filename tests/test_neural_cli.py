@@ -56,7 +56,7 @@ def test_the_dance_follows_its_motif_plan_far_above_chance(music):
     Before the motif words were given to the network (one-hot motifs), 3 % of beats
     followed the plan: chance.
     """
-    from dancesynth.bench.structure import found_motifs
+    from dancesynth.bench.dances import found_motifs
     from dancesynth.motion.motifs import load_motif_model
 
     model = load_motif_model()
@@ -110,7 +110,7 @@ def test_missing_and_corrupt_weights(tmp_path):
 def test_the_spread_post_filter_livens_the_network_and_paper_dances_the_network_alone(tmp_path, capsys, music):
     """The post-filter widens the network's damped motion (more travel, faster joints) within the
     liveliness bounds, on the same plan and beats; ``--paper`` leaves it out and says so."""
-    from dancesynth.bench.structure import liveliness
+    from dancesynth.bench.dances import liveliness
     from dancesynth.engines.neural.engine import SPREAD_CAP
 
     full = dance(music, engine="neural", seed=2)

@@ -119,7 +119,7 @@ def _score(clip, song: dict, reference, style, source_clips: list) -> dict:
 
 
 def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
-    from .structure import engine_dances
+    from .dances import engine_dances
     from ..eval.evaluate import mocap_reference
 
     songs = _songs(cfg, progress)

@@ -10,7 +10,7 @@ windows):
   same style that is not the reference;
 - ``frozen``: the middle pose of the first remaining clip held still for each song's
   length -- the ceiling no dance should come near;
-- every mocap engine (``bench.structure.engine_dances``: streaming, streaming +
+- every mocap engine (``bench.dances.engine_dances``: streaming, streaming +
   signature, global DP, choreography mixer, random walk) with the product defaults on
   every configured song, given a database that holds only the reduced style: the
   dances, their graphs and the motif model they plan with are made from the remaining
@@ -63,7 +63,7 @@ def _songs(cfg: BenchConfig) -> list[tuple[str, object]]:
 def realism_section(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
     """FID_k, FID_g, Div_k, Div_g of the mocap floor, a frozen pose and each engine against held-out mocap."""
     from ..motion.database import MotionDatabase
-    from .structure import engine_dances
+    from .dances import engine_dances
     from ..eval.realism import held_out_split, realism_scores
 
     unknown = set(cfg.realism_engines) - set(ENGINES)
