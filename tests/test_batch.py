@@ -101,6 +101,25 @@ def test_the_cli_exit_code_says_a_song_failed_and_a_rerun_skips_finished_songs(l
     assert "danced    6 song(s), 1 failed" in other.stdout
 
 
+def test_a_rerun_with_nothing_to_do_is_decided_from_the_manifest_alone(library, tmp_path, monkeypatch):
+    out = tmp_path / "dances"
+    songs = [library / "b" / "vibe.ogg", library / "a" / "karissa.ogg"]
+    assert dancesynth.batch(songs, out, workers=1).done == 2
+
+    def must_not_run(*args, **kwargs):
+        raise AssertionError("a batch with nothing to do loaded a character, the database or a worker")
+
+    from dancesynth.batching import pool
+    from dancesynth.export import formats
+    from dancesynth.motion import catalog
+
+    monkeypatch.setattr(pool, "run_local", must_not_run)
+    monkeypatch.setattr(formats, "output_character", must_not_run)
+    monkeypatch.setattr(catalog, "list_styles", must_not_run)
+    again = dancesynth.batch(songs, out, workers=1)
+    assert (again.done, again.failed, again.skipped) == (0, 0, 2) and len(records(out)) == 2
+
+
 def test_an_interrupted_batch_leaves_nothing_partial_and_resumes(library, tmp_path):
     out = tmp_path / "dances"
     songs = sorted((library / "a").glob("*.ogg")) + sorted((library / "b").glob("*.ogg"))

@@ -80,15 +80,15 @@ def batch(songs=(), out_dir="dances", *, list_file=None, folder=None, format: st
                              bone_map=None if bone_map is None else str(bone_map), evaluate=evaluate, report=report,
                              threads=thread_count() if threads is None else int(threads))
     out_dir = output_folder(os.path.abspath(out_dir), "the dances")
-    _check_settings(settings)
     jobs = plan_jobs(collect_songs(songs, list_file=list_file, folder=folder), suffix)
     manifest = Manifest(out_dir)
     key = settings_key(settings.key_fields())
     last = manifest.last_records()
     todo = [j for j in jobs if not manifest.is_done(last.get(j.name), j.song, key, out_dir)]
     result = BatchResult(out_dir, manifest.path, skipped=len(jobs) - len(todo))
-    if not todo:
+    if not todo:   # decided from the manifest alone: no character, database or worker is touched
         return result
+    _check_settings(settings)
     use_numba_cache()  # the workers inherit it
     t0 = time.perf_counter()
     try:
