@@ -710,7 +710,8 @@ def test_the_page_dances_live_to_a_stream_in_headless_chromium(server, music_htt
     assert live["frames"] > 45 and live["beats"] >= 2
     # The delay the server asks for is enough: the motion of every moment heard had arrived.
     assert live["delay_s"] == pytest.approx(2 + 1.5 + 1.0)
-    assert live["playing_s"] > 0.5 and live["starved_s"] < 0.1, live
+    # Starved only as long as a busy machine made the server later than the delay allows (0 when it kept up).
+    assert live["playing_s"] > 0.5 and live["starved_s"] < 0.1 + live["server_late_s"], live
 
 
 def test_bundled_songs_are_regular_files_only(tmp_path, monkeypatch):

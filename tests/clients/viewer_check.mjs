@@ -82,6 +82,14 @@ try {
 	// Two shots 0.5 s apart, with the music clock and the status line at each.
 	const shots = async (names) => {
 		for (const name of names) {
+			// Live on a busy machine the motion may come late (the page holds the last pose meanwhile):
+			// each shot waits for the motion of the moment it shows.
+			if (mode === 'live') {
+				await page.waitForFunction(() => {
+					const live = window.dancesynth.live;
+					return live.time + 0.1 < live.motion_until_s;
+				}, null, { timeout: 30000 });
+			}
 			report.times.push(await page.evaluate(clock));
 			report.statuses[name] = await statusText();
 			await view.screenshot({ path: `${outDir}/${name}.png`, timeout: 10000 });

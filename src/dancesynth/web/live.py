@@ -14,7 +14,8 @@ Messages, in order: ``start`` (sample rate, fps, ``start_s`` the stream time of 
 first audio sample this viewer gets, ``delay_s`` how long to buffer before playing, the
 ``character``), binary 16-bit mono PCM, ``hierarchy`` once (the character's skeleton as a
 BVH header: its joints are named as the nodes of ``/api/characters/{name}.glb``), ``frames``
-(BVH rows from ``start_frame``), ``beats`` (stream times), then ``end`` (a summary) or ``error``.
+(BVH rows from ``start_frame``), ``beats`` (stream times, and ``late_s``: how much later than the
+delay allows the segment's motion was ready), then ``end`` (a summary) or ``error``.
 """
 
 from __future__ import annotations
@@ -116,8 +117,11 @@ class Broadcast:
             post(self._publish_frames, hierarchy, clip.fps, rows)
 
         def on_report(report):
+            # late_s: how much later than the delay allows this segment's motion was ready (a slow or busy
+            # machine); a viewer may be starved that long, and no longer.
+            late_s = max(0.0, report.ready_s - report.audio_end_s - DELAY_MARGIN_S)
             text = json.dumps({"type": "beats", "beats": [round(t, 4) for t in report.beat_times_s],
-                               "tempo_bpm": round(float(report.tempo_bpm), 2)})
+                               "tempo_bpm": round(float(report.tempo_bpm), 2), "late_s": round(late_s, 4)})
             post(self._publish_beats, report.beat_times_s, text)
 
         source = relay = None

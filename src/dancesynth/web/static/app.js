@@ -211,6 +211,7 @@ function frame() {
 		if (now > live.t0 && live.last !== null) {
 			state.live.playing_s += now - live.last;
 			const ready = live.base === null ? -Infinity : (live.base + live.rows.length) / live.fps;
+			state.live.motion_until_s = ready;
 			if (live.time > ready) state.live.starved_s += now - live.last;
 		}
 		live.last = now;
@@ -530,8 +531,8 @@ function startLive(event) {
 	ws.binaryType = 'arraybuffer';
 	live = { ws, ctx: new AudioContext(), t0: null, last: null, sr: 22050, samples: 0, fps: 30, delay: 10,
 		start: 0, hierarchy: null, rows: [], base: null, beats: [], time: 0, character, stick: null, model: null };
-	state.live = { state: 'connecting', frames: 0, beats: 0, time: 0, heard_s: 0, error: null, starved_s: 0,
-		playing_s: 0, delay_s: null, character, model: mesh ? 'loading' : null };
+	state.live = { state: 'connecting', frames: 0, beats: 0, time: 0, heard_s: 0, error: null, starved_s: 0, motion_until_s: 0,
+		playing_s: 0, server_late_s: 0, delay_s: null, character, model: mesh ? 'loading' : null };
 	setStatus('Connecting to the stream…');
 	$('info').textContent = mesh ? `Live: the ${character}` : `Live: the stick figure on the ${character} rig`;
 	offerFigures(false); // the stick figure until the character's mesh is here
@@ -565,6 +566,7 @@ function startLive(event) {
 		} else if (m.type === 'beats') {
 			live.beats.push(...m.beats);
 			state.live.beats = live.beats.length;
+			state.live.server_late_s += m.late_s || 0;
 		} else if (m.type === 'end') {
 			state.live.state = 'ended';
 			setStatus(`The stream ended: ${m.summary.segments} segments, style ${m.summary.style}; ` +
