@@ -157,6 +157,40 @@ def test_accent_timing_makes_a_motion_that_never_stops_hit_every_beat():
     assert 0.65 < speed[10:-10].min() < 0.75 and 1.25 < speed[10:-10].max() < 1.35
 
 
+def test_stop_depth_tells_a_stop_from_a_slowdown():
+    """Issue 31 item 6: any 5 % speed dip counted as a stop, so a glide eased a little scored precision and
+    recall 1.0. A visible accent now stops the body as much as the mocap's median accent on its beats."""
+    from dancesynth.engines.timing import beat_ease
+    from dancesynth.eval.evaluate import evaluate
+    from dancesynth.motion.beats import stop_depths
+
+    # The depth is one minus the speed at the minimum over the lower neighbouring peak.
+    t = np.arange(600) / 60.0
+    assert stop_depths(1.0 - 0.05 * np.cos(2 * np.pi * 2 * t), np.arange(30, 570, 30)) == \
+        pytest.approx(1 - 0.95 / 1.05, abs=1e-3)
+    assert stop_depths(np.abs(np.sin(2 * np.pi * t)), np.arange(30, 570, 30)) == pytest.approx(1.0)
+
+    style = gliding_style()
+    music = 0.2 + 0.45 * np.arange(30)
+    count = np.arange(30.0)
+    slight, _ = _glide(style, music, count, beat_ease(30, amount=0.1))      # speed 0.9 on the beat, 1.1 between
+    r = evaluate(slight, music_beats_s=music)
+    # every dip counted, as before (the first and last beats are the clip's ends)
+    assert r["accent_precision"] == 1.0 and r["accent_recall"] >= 28 / 30
+    assert r["stop_depth_on_beats"] == pytest.approx(1 - 0.9 / 1.1, abs=0.03)
+    assert r["visible_accent_recall"] == 0.0                            # none as deep as a mocap accent
+    # The product's easing (0.3) of a glide that never stops: 0.7 on the beat, 1.3 between, a dip as deep
+    # as the mocap's median accent. It counts, and the bench shows it beside the same path uneased.
+    eased, _ = _glide(style, music, count, beat_ease(30, amount=0.3))
+    r = evaluate(eased, music_beats_s=music)
+    assert r["stop_depth_on_beats"] == pytest.approx(1 - 0.7 / 1.3, abs=0.03)
+    assert r["visible_accent_recall"] >= 28 / 30
+    # A body that stops on every beat (back and forth) is a visible accent each time.
+    back_and_forth = biped(standing(t, x=0.3 * np.cos(np.pi * (t - 0.2) / 0.5)))   # stops at 0.2 + 0.5 k s
+    r = evaluate(back_and_forth, music_beats_s=0.2 + 0.5 * np.arange(20))
+    assert r["stop_depth_on_beats"] > 0.9 and r["visible_accent_precision"] == 1.0
+
+
 def test_accent_timing_refuses_amounts_that_would_halt_or_reverse_the_motion():
     from dancesynth.engines.timing import beat_ease
 

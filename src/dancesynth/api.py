@@ -13,6 +13,7 @@ from .engines.beatgrid import METRE_SHARE, BeatGrid, StyleFit, beat_grid, fit_st
 from .engines.graph.cache import load_graph
 from .engines.graph.engine import EngineConfig, GraphEngine, MusicSegment, SegmentFrames
 from .engines.graph.meta_graph import GraphConfig
+from .engines.timing import plain_timing
 from .errors import InputError
 from .motion.catalog import list_styles  # noqa: F401  (part of this module's API)
 from .motion.database import MotionDatabase, open_database
@@ -42,6 +43,8 @@ class DanceConfig:
     follow_signature: bool = False      # streaming: also keep the genre's motif signature (engines/graph/signature.py)
     model: str | None = None            # neural: the weights to dance with (a .pt of 'dancesynth train'); None:
                                         # the shipped model of the style's genre
+    accent_timing: bool = True          # streaming, global, choreography: ease into each beat (engines/timing.py);
+                                        # False: each piece at one rate, on the same path (the bench compares)
     restore_spread: bool = True         # neural: widen the network's damped motion toward the mocap's spread
                                         # (engines/neural/data.restore_spread); False: the network alone
 
@@ -327,7 +330,8 @@ def _graph_dance_fit(fit: StyleFit, music: MusicFeatures, db: MotionDatabase, co
         from .engines.graph.signature import database_signature
 
         signature = database_signature(style, graph, db, config.render.signature_weight)
-    engine = GraphEngine(style, graph, config.render, fps=config.fps, signature=signature)
+    render = config.render if config.accent_timing else plain_timing(config.render)
+    engine = GraphEngine(style, graph, render, fps=config.fps, signature=signature)
     segments, stats = synthesise(engine, grid, music.duration_s, config, progress)
     timings["synthesis_s"] = time.perf_counter() - t
 

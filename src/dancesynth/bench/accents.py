@@ -13,6 +13,11 @@ each engine dances with the product defaults, and ``evaluate`` scores it:
 - the guards: playback rates within [0.8, 1.25], intensity Spearman, transition
   jumps and foot skating beside the style's mocap, one-frame joint steps.
 
+Visible accents are counted again with only the kinematic beats that stop the body as much as the
+mocap's median accent does (``stop_depth_on_beats``; ``EvalParams.visible_stop_depth``), and every
+engine with accent timing dances each song again without it, in the same style and on the same path
+(``same_path`` checks), so the table shows what the easing adds to what the chosen pieces give.
+
 The raw mocap row scores each clip of the styles danced against its own motion
 beats (it has no music); the paper row is the streaming engine with Xu et al.'s objective and
 graph as printed (``--paper``); the lookahead row is the streaming engine with ``--lookahead 5``
@@ -30,8 +35,11 @@ from .quality import at_fps, mean_scores, mocap_scores
 
 TITLES = {"streaming": "streaming", "lookahead": "+lookahead", "signature": "+signature", "global": "global DP",
           "choreography": "choreography", "random_walk": "random walk", "paper": "paper", "mocap": "mocap*"}
-KEYS = ("accent_precision", "accent_precision_chance", "accent_precision_x_chance", "accent_recall",
-        "accent_recall_chance", "accent_recall_x_chance", "downbeat_recall", "downbeat_recall_chance",
+ACCENT_KEYS = ("accent_precision", "accent_precision_chance", "accent_precision_x_chance", "accent_recall",
+               "accent_recall_chance", "accent_recall_x_chance", "stop_depth_on_beats", "visible_accent_precision",
+               "visible_accent_precision_chance", "visible_accent_precision_x_chance", "visible_accent_recall",
+               "visible_accent_recall_chance", "visible_accent_recall_x_chance")
+KEYS = ACCENT_KEYS + ("downbeat_recall", "downbeat_recall_chance",
         "bar_accent_on_downbeat", "bar_accent_chance", "warp_in_range", "intensity_spearman",
         "transition_jump_vs_mocap_p99", "worst_transition_jump_vs_mocap_p99", "jump_p99_vs_mocap",
         "joint_speed_p99_vs_mocap", "root_travel_vs_mocap", "foot_skate_m_s", "foot_skate_vs_mocap", "pfc",
@@ -40,6 +48,11 @@ LABELS = {"accent_precision": "precision: kinematic beats on a beat (±50 ms)",
           "accent_precision_chance": "  chance (circular shift)", "accent_precision_x_chance": "  × chance",
           "accent_recall": "recall: beats with a kinematic beat (±50 ms)",
           "accent_recall_chance": "  chance (circular shift)", "accent_recall_x_chance": "  × chance",
+          "stop_depth_on_beats": "stop depth of those on a beat (median; 1 = full stop)",
+          "visible_accent_precision": "precision, visible accents only (stop depth ≥ mocap's median accent's)",
+          "visible_accent_precision_chance": "  chance (circular shift)", "visible_accent_precision_x_chance":
+          "  × chance", "visible_accent_recall": "recall, visible accents only",
+          "visible_accent_recall_chance": "  chance (circular shift)", "visible_accent_recall_x_chance": "  × chance",
           "downbeat_recall": "downbeats with a kinematic beat", "downbeat_recall_chance": "  chance",
           "bar_accent_on_downbeat": "bars with the strongest accent on the 1 (4/4)",
           "bar_accent_chance": "  chance (1 / beats per bar)",
@@ -57,6 +70,14 @@ LABELS = {"accent_precision": "precision: kinematic beats on a beat (±50 ms)",
           "pfc_vs_source": "PFC / the same source frames' as captured",
           "source_share": "  share of the dance in uncut runs of 1 s or more (those compared)",
           "one_frame_steps": "one-frame joint steps > 30° not in the source (total)"}
+UNEASED_KEYS = ("accent_precision", "accent_recall", "stop_depth_on_beats", "visible_accent_precision",
+                "visible_accent_precision_x_chance", "visible_accent_recall", "visible_accent_recall_x_chance",
+                "same_path")
+UNEASED_LABELS = {"accent_precision": "precision", "accent_recall": "recall", "stop_depth_on_beats": "stop depth",
+                  "visible_accent_precision": "visible precision", "visible_accent_precision_x_chance": "  × chance",
+                  "visible_accent_recall": "visible recall", "visible_accent_recall_x_chance": "  × chance",
+                  "same_path": "share of songs on the same path"}
+PLAIN_ALREADY = ("paper",)  # engines that play each piece at one rate already: uneased is the same dance
 MOCAP_NOTE = ("* mocap: each clip of the styles danced, against its own motion beats (no music, no bars, "
               "no loudness, no transitions); its one-frame steps are its own capture glitches, per clip")
 
@@ -118,6 +139,17 @@ def _score(clip, song: dict, reference, style, source_clips: list) -> dict:
     return r
 
 
+def _uneased(name: str, clip, song: dict, db, seed: int) -> dict:
+    """The accents of the same engine's dance with the accent timing off, in the same style: on the same path
+    (``same_path`` says whether it was), what the path's own stops give without the easing."""
+    from .dances import engine_dances, same_path
+    from ..eval.evaluate import evaluate
+
+    plain = engine_dances(song["music"], db, seed, [name], style=clip.provenance.style, accent_timing=False)[name]
+    r = evaluate(plain, music_beats_s=song["beats"])
+    return {**{k: r.get(k) for k in ACCENT_KEYS}, "same_path": float(same_path(clip, plain))}
+
+
 def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
     from .dances import engine_dances
     from ..eval.evaluate import mocap_reference
@@ -128,7 +160,7 @@ def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
     for i, song in enumerate(songs):
         if progress:
             progress(f"accents: song {i + 1}/{len(songs)}: {song['name']}")
-        scores, styles = {}, {}
+        scores, styles, uneased = {}, {}, {}
         for name, clip in engine_dances(song["music"], db, cfg.seed, cfg.accent_engines, style=None).items():
             key = (clip.provenance.style, clip.fps)
             if key not in refs:
@@ -140,8 +172,11 @@ def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
                 sources[st.name] = [st.clip(c) for c in range(st.n_clips)]
             scores[name] = _score(clip, song, refs[key], st, sources[st.name])
             styles[name] = clip.provenance.style
+            uneased[name] = _uneased(name, clip, song, db, cfg.seed) if name not in PLAIN_ALREADY else \
+                {**{k: scores[name].get(k) for k in ACCENT_KEYS}, "same_path": 1.0}   # its timing is plain
         per_song.append({"song": song["name"], "set": song["set"], "tempo_bpm": song["music"].tempo_bpm,
-                         "beats_per_bar": song["beats_per_bar"], "styles": styles, "scores": scores})
+                         "beats_per_bar": song["beats_per_bar"], "styles": styles, "scores": scores,
+                         "uneased": uneased})
     mocap = {}
     for (style, _), clips in clips_by_style.items():
         if progress:
@@ -179,6 +214,8 @@ def summarise(per_song: list[dict], mocap: dict, engines) -> dict:
             m["waltz_period_3"] = (float(np.mean([r.get("energy_period_beats") == 3 for r in three]))
                                    if three else None)
             m["one_frame_steps"] = int(sum(r.get("one_frame_steps") or 0 for r in scored))
+            plain = mean_scores([s["uneased"][e] for s in rows if e in s.get("uneased", {})])
+            m.update({f"uneased_{k}": plain.get(k) for k in UNEASED_KEYS})
             worst = [r["transition_jump_vs_mocap_p99"] for r in scored if r.get("transition_jump_vs_mocap_p99")]
             m["worst_transition_jump_vs_mocap_p99"] = max(worst) if worst else None
             table_[e] = m
@@ -197,6 +234,9 @@ def format_accents(s: dict) -> str:
         n = sum(1 for x in s["songs"] if x["set"] == subset)
         header = ["metric"] + [TITLES[e] for e in cols] + [TITLES["mocap"]]
         rows = [[LABELS[k]] + [cols[e].get(k) for e in cols] + [s["summary"]["mocap"].get(k)] for k in KEYS]
+        # The same paths with the accent timing off: what the chosen pieces' own stops give (mocap: as captured).
+        rows += [[f"uneased, same path: {UNEASED_LABELS[k]}"] + [cols[e].get(f"uneased_{k}") for e in cols]
+                 + [s["summary"]["mocap"].get(k)] for k in UNEASED_KEYS]
         rows.append(["3/4 songs danced with a 3-beat energy period"] + [cols[e].get("waltz_period_3") for e in cols]
                     + [None])
         blocks.append(table(f"Visible accents, {title}: mean over {n} songs", header, rows,

@@ -64,8 +64,9 @@ def plan_followed(clip, found) -> float | None:
     return float(np.mean(np.asarray(found[:n])[planned] == np.asarray(plan[:n])[planned])) if planned.any() else None
 
 
-def engine_dances(music, db, seed: int, engines, style: str | None = GENRE) -> dict:
-    """Each engine's dance of ``music`` in ``style`` (None: the product's choice), with the wall time it took."""
+def engine_dances(music, db, seed: int, engines, style: str | None = GENRE, accent_timing: bool = True) -> dict:
+    """Each engine's dance of ``music`` in ``style`` (None: the product's choice), with the wall time it took;
+    ``accent_timing`` as ``DanceConfig``'s (False: each piece at one rate, on the same path)."""
     from ..api import dance
     from ..engines.graph.engine import EngineConfig
     from ..engines.graph.meta_graph import GraphConfig
@@ -82,11 +83,25 @@ def engine_dances(music, db, seed: int, engines, style: str | None = GENRE) -> d
         if name == "random_walk":
             ref = out.get("streaming") or dance(music, database=db, style=style, seed=seed)
             clip = walk_dance(db.styles[ref.provenance.style], music, subdivide=ref.provenance.summary["subdivide"],
-                              seed=seed, fps=ref.fps)
+                              seed=seed, fps=ref.fps, accent_timing=accent_timing)
         elif name in kinds:
-            clip = dance(music, database=db, style=style, seed=seed, **kinds[name])
+            clip = dance(music, database=db, style=style, seed=seed, accent_timing=accent_timing, **kinds[name])
         else:
             continue
         out[name] = clip
         clip.meta.setdefault("bench_wall_s", time.perf_counter() - t)
     return out
+
+
+def same_path(a, b) -> bool:
+    """Whether two dances walk the same path: the same style, jumps at the same times and the same source
+    frame on every beat (what ``accent_timing`` must leave alone)."""
+    pa, pb = a.provenance, b.provenance
+    if pa.style != pb.style or not np.array_equal(pa.transition_times_s, pb.transition_times_s):
+        return False
+    if pa.source_frames is None or pb.source_frames is None or len(pa.source_frames) != len(pb.source_frames):
+        return pa.source_frames is None and pb.source_frames is None
+    beats = np.asarray(pa.grid_times_s, dtype=np.float64)
+    frames = np.clip(np.rint(beats * a.fps).astype(np.int64), 0, len(pa.source_frames) - 1)
+    # Within 2 source frames: a beat falls between the dance's frames, where the two timings differ a little.
+    return bool(np.allclose(np.asarray(pa.source_frames)[frames], np.asarray(pb.source_frames)[frames], atol=2.0))

@@ -41,18 +41,22 @@ TRANSITION_NOTE = ("transitions before 0 s (a jump on the beat the grid adds bef
 
 
 def walk_dance(style, music: MusicFeatures, *, subdivide: int = 1, seed: int = 0, fps: float = 30.0,
-               segment_s: float = 5.0) -> MotionClip:
-    """A random walk on ``style``'s graph danced to ``music``, rendered like ``dancesynth.dance``."""
+               segment_s: float = 5.0, accent_timing: bool = True) -> MotionClip:
+    """A random walk on ``style``'s graph danced to ``music``, rendered like ``dancesynth.dance``
+    (``accent_timing`` as ``DanceConfig``'s)."""
     from ..api import DanceConfig, synthesise
     from ..engines.beatgrid import beat_grid
     from ..engines.graph.cache import load_graph
+    from ..engines.graph.engine import EngineConfig
     from ..engines.graph.random_walk import OutSteps, RandomWalkEngine
+    from ..engines.timing import plain_timing
 
     style = style.material  # the graph the product's engines walk
     graph, _ = load_graph(style)
     grid = beat_grid(music, subdivide=subdivide)
-    engine = RandomWalkEngine(style, graph, fps=fps)
-    config = DanceConfig(segment_s=segment_s, fps=fps, seed=seed)
+    render = EngineConfig() if accent_timing else plain_timing(EngineConfig())
+    engine = RandomWalkEngine(style, graph, render, fps=fps)
+    config = DanceConfig(segment_s=segment_s, fps=fps, seed=seed, accent_timing=accent_timing)
     segments, stats = synthesise(engine, grid, music.duration_s, config)
     dead_end = OutSteps.of(graph).count == 0  # where the walk restarted
     run = EngineRun(style=style.name, genre=style.genre, style_fingerprint=style.fingerprint, subdivide=subdivide,

@@ -75,6 +75,14 @@ def ease_within(ease, rates, max_rate: float | None, count=None) -> np.ndarray:
     return ease * np.minimum(np.r_[scale[0], scale], np.r_[scale, scale[-1]])
 
 
+def plain_timing(config):
+    """``config`` (an engine's or the mixer's) with the accent timing off: each piece at one rate, as
+    the papers play it. The path is the same; only where within each piece its frames are shown changes."""
+    from dataclasses import replace
+
+    return replace(config, ease_beats=0.0, ease_downbeat=0.0)
+
+
 def _timing(u, count0, count1, ease0, ease1):
     """``(ease, ease_rate)`` at ``u``: ``F(u) / F(1)`` and ``span * (1 - a(c) cos 2 pi c) / F(1)``, with
     ``F(u)`` the integral of ``1 - a(c) cos(2 pi c) dc`` from the piece's start, in beats counted from

@@ -189,6 +189,14 @@ def beat_count_ratio(music_beats_s, motion_beats_s) -> float:
     return float(motion.size / music.size)
 
 
+def on_beats(motion_beats_s, music_beats_s, *, window_s: float) -> np.ndarray:
+    """Per motion beat, whether a music beat lies within +-``window_s`` of it (1 ns tolerance)."""
+    music = as_times(music_beats_s, "music_beats_s")
+    motion = as_times(motion_beats_s, "motion_beats_s")
+    window = check_seconds(window_s, "window_s", allow_zero=True)
+    return _nearest_distance(motion, music) <= window + TIME_TOL_S
+
+
 def aligned_beat_ratio(music_beats_s, motion_beats_s, *, window_s: float) -> float:
     """Fraction of kinematic beats that lie within ``window_s`` of a music beat.
 
@@ -197,12 +205,8 @@ def aligned_beat_ratio(music_beats_s, motion_beats_s, *, window_s: float) -> flo
     frame" -- pass ``window_s = 1 / fps`` (``evaluate`` does). Their mocap scores 72.5 %.
     NaN when there are no kinematic beats; 0.0 when there are no music beats.
     """
-    music = as_times(music_beats_s, "music_beats_s")
-    motion = as_times(motion_beats_s, "motion_beats_s")
-    window = check_seconds(window_s, "window_s", allow_zero=True)
-    if motion.size == 0:
-        return _NAN
-    return float(np.mean(_nearest_distance(motion, music) <= window + TIME_TOL_S))
+    hits = on_beats(motion_beats_s, music_beats_s, window_s=window_s)
+    return float(np.mean(hits)) if hits.size else _NAN
 
 
 def accent_precision_recall(music_beats_s, motion_beats_s, *, window_s: float = DEFAULT_HIT_WINDOW_S

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import InputError, ModelError
 from ..kinematics import clip_fk
+from ..motion.beats import stop_depths
 from ..motion.resample import sample_frames
 from ..types import MotionClip
 from . import beat_metrics as bm
@@ -34,6 +35,7 @@ class EvalParams:
     beat_polyorder: int = mm.DEFAULT_POLYORDER                # ... and its polynomial order
     beat_min_separation_s: float = mm.DEFAULT_MIN_SEPARATION_S
     beat_min_prominence_frac: float = mm.DEFAULT_MIN_PROMINENCE_FRAC
+    visible_stop_depth: float = mm.VISIBLE_STOP_DEPTH         # a kinematic beat this deep is a visible accent
     transition_radius_s: float = mm.DEFAULT_TRANSITION_RADIUS_S  # search +- this around a transition
     contact_height_m: float = mm.DEFAULT_CONTACT_HEIGHT_M     # foot on the floor: within this of it
     floor_m: float | None = None                              # None: estimated (median lowest foot point)
@@ -73,6 +75,16 @@ METRICS: dict[str, MetricInfo] = {
                         "beat alignment"),
     "accent_recall_chance": _m("... by chance (kinematic beats circularly shifted)", "", "info", "beat alignment"),
     "accent_recall_x_chance": _m("recall / chance", "", "higher", "beat alignment"),
+    "stop_depth_on_beats": _m("median stop depth of the kinematic beats on a music beat (1 = a full stop)", "",
+                              "≈mocap", "beat alignment"),
+    "visible_accent_precision": _m("kinematic beats as deep as the mocap's accents, on a music beat (precision)",
+                                   "", "higher", "beat alignment"),
+    "visible_accent_precision_chance": _m("... by chance (circularly shifted)", "", "info", "beat alignment"),
+    "visible_accent_precision_x_chance": _m("visible precision / chance", "", "higher", "beat alignment"),
+    "visible_accent_recall": _m("music beats with a kinematic beat as deep as the mocap's accents (recall)", "",
+                                "higher", "beat alignment"),
+    "visible_accent_recall_chance": _m("... by chance (circularly shifted)", "", "info", "beat alignment"),
+    "visible_accent_recall_x_chance": _m("visible recall / chance", "", "higher", "beat alignment"),
     "beats_per_bar": _m("music beats per bar", "", "info", "bars"),
     "downbeat_precision": _m("kinematic beats on a downbeat (precision)", "", "higher", "bars"),
     "downbeat_precision_chance": _m("... by chance", "", "info", "bars"),
@@ -152,7 +164,7 @@ def evaluate(motion: MotionClip, *, music_beats_s=None, music_loudness_db=None, 
                                      min_prominence_frac=p.beat_min_prominence_frac, global_pos=g_pos)
     out["n_kinematic_beats"] = int(kin_s.size)
     if music_beats_s is not None:
-        out.update(_music_metrics(motion, kin_s, music_beats_s, music_loudness_db, g_pos, p))
+        out.update(_music_metrics(motion, kin_s, smooth, music_beats_s, music_loudness_db, g_pos, p))
         if beat_in_bar is not None:
             out.update(_bar_metrics(motion, kin_s, smooth, music_beats_s, beat_in_bar, beats_per_bar, g_pos, p))
     elif music_loudness_db is not None:
@@ -204,7 +216,7 @@ _WARP_KEYS = {"median_abs_log2": "warp_median_abs_log2", "frac_over_10pct": "war
               "frac_over_25pct": "warp_frac_over_25pct", "min": "warp_rate_min", "max": "warp_rate_max"}
 
 
-def _music_metrics(motion, kin_s, music_beats_s, music_loudness_db, g_pos, p: EvalParams) -> dict:
+def _music_metrics(motion, kin_s, smooth, music_beats_s, music_loudness_db, g_pos, p: EvalParams) -> dict:
     beats = bm.as_values(music_beats_s, "music_beats_s")
     if np.any(np.diff(beats) <= 0):
         raise InputError("music_beats_s must be strictly increasing seconds (as MusicFeatures.beat_times_s); "
@@ -221,11 +233,18 @@ def _music_metrics(motion, kin_s, music_beats_s, music_loudness_db, g_pos, p: Ev
         "aligned_beat_ratio": bm.aligned_beat_ratio(music, kin_s, window_s=aligned_window),
     }
     span = (0.0, motion.duration_s)
-    precision, recall = bm.accent_precision_recall(music, kin_s, window_s=p.hit_window_s)
-    chance_p, chance_r = bm.shifted_chance(music, kin_s, span_s=span, window_s=p.hit_window_s)
-    out.update(accent_precision=precision, accent_precision_chance=chance_p,
-               accent_precision_x_chance=_ratio(precision, chance_p), accent_recall=recall,
-               accent_recall_chance=chance_r, accent_recall_x_chance=_ratio(recall, chance_r))
+    # Every speed minimum, then only those that stop the body as much as the mocap's accents do: easing
+    # a glide makes regular shallow dips, which the first counts and the second does not.
+    depth = stop_depths(smooth, np.round(kin_s * motion.fps).astype(np.int64))
+    for prefix, kin in (("", kin_s), ("visible_", kin_s[depth >= p.visible_stop_depth])):
+        precision, recall = bm.accent_precision_recall(music, kin, window_s=p.hit_window_s)
+        chance_p, chance_r = bm.shifted_chance(music, kin, span_s=span, window_s=p.hit_window_s)
+        out.update({f"{prefix}accent_precision": precision, f"{prefix}accent_precision_chance": chance_p,
+                    f"{prefix}accent_precision_x_chance": _ratio(precision, chance_p),
+                    f"{prefix}accent_recall": recall, f"{prefix}accent_recall_chance": chance_r,
+                    f"{prefix}accent_recall_x_chance": _ratio(recall, chance_r)})
+    on_beat = bm.on_beats(kin_s, music, window_s=p.hit_window_s)
+    out["stop_depth_on_beats"] = float(np.median(depth[on_beat])) if on_beat.any() else None
     if music_loudness_db is not None:
         loud = bm.as_values(music_loudness_db, "music_loudness_db", allow_inf=True)
         if loud.size != max(beats.size - 1, 0):

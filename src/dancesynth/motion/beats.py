@@ -123,6 +123,22 @@ def kinematic_beats(speed: np.ndarray, fps: float, *, smooth_s: float = SMOOTH_S
     return frames.astype(np.int64), smooth
 
 
+def stop_depths(smooth: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    """How nearly each speed minimum stops the body, 0..1: one minus the speed at the minimum over
+    the lower of its two neighbouring peaks (the peaks of its prominence: the highest speed on each
+    side before the curve falls lower than this minimum). 1 is a full stop between two movements;
+    a body gliding on with a small dip scores near 0, however regular the dips are."""
+    from scipy import signal
+
+    smooth = np.asarray(smooth, dtype=np.float64)
+    frames = np.asarray(frames, dtype=np.int64)
+    if frames.size == 0:
+        return np.zeros(0)
+    prominence = signal.peak_prominences(-smooth, frames)[0]
+    peak = smooth[frames] + prominence
+    return np.where(peak > 0, prominence / np.where(peak > 0, peak, 1.0), 0.0)
+
+
 def snap_beats(beat_frames: np.ndarray, accents: np.ndarray, *, fraction: float) -> np.ndarray:
     """Move each beat to the nearest accent frame within ``fraction`` of its beat period.
 

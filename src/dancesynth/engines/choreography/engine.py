@@ -22,6 +22,7 @@ from ...motion.words import clip_words
 from ...provenance import EngineRun
 from ...types import MotionClip, MusicFeatures
 from ..beatgrid import StyleFit, beat_grid, fit_style, fit_summary
+from ..timing import plain_timing
 from .level import constraint_beats, parse_motif_at, plan_motifs, recreate_plan
 from .mixer import MixerConfig, mix, substitute_motifs, word_bank
 
@@ -94,6 +95,8 @@ def choreography_dance(music: MusicFeatures, db: MotionDatabase, config, *, timi
     user's constraints; ``motif_model`` the database's (``motion.motifs.load_motif_model``).
     """
     t = time.perf_counter()
+    if not config.accent_timing:
+        mixer = plain_timing(mixer)
     model = motif_model
     pool = db.styles_of(config.style) if config.style else list(db.styles.values())
     ref = reference_motifs(reference, str(config.recreate), model, pool) if reference is not None else None
