@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -189,6 +191,38 @@ def test_stop_depth_tells_a_stop_from_a_slowdown():
     back_and_forth = biped(standing(t, x=0.3 * np.cos(np.pi * (t - 0.2) / 0.5)))   # stops at 0.2 + 0.5 k s
     r = evaluate(back_and_forth, music_beats_s=0.2 + 0.5 * np.arange(20))
     assert r["stop_depth_on_beats"] > 0.9 and r["visible_accent_precision"] == 1.0
+
+
+def test_a_quick_twist_played_faster_is_spread_not_snapped():
+    """Issue 31 item 4: a limb the mocap twists 36 degrees over three frames at 60 fps, calm around, turns
+    24 degrees a frame at 30 fps played evenly; eased up to 1.7x between beats it turns 36 degrees in one
+    frame with calm frames either side -- a snap the capture does not have. Every engine's last pass
+    (``footlock._without_snaps``) spreads such a snap over a few frames and leaves the rest alone."""
+    from dancesynth import rotations as rot
+    from dancesynth.engines.footlock import _without_snaps
+    from dancesynth.engines.timing import beat_ease, ease_within
+    from dancesynth.eval.artefacts import one_frame_steps
+
+    style = gliding_style()
+    arm = style.skeleton.index("LeftArm")
+    q = style.local_rot.astype(np.float64)
+    for at in range(46, 1140, 60):          # a twist in every second piece, between its beats
+        for k in range(1, 4):
+            q[at + k:, arm] = rot.mul(rot.exp(np.array([np.radians(12), 0.0, 0.0])), q[at + k:, arm])
+    style = replace(style, local_rot=q.astype(np.float32))
+    music = 0.2 + 0.45 * np.arange(30)
+    count = np.arange(30.0)
+    f = style.beat_frames[:30].astype(float)
+    eased, _ = _glide(style, music, count, ease_within(beat_ease(30, amount=0.3), (f[1:] - f[:-1]) / style.fps
+                                                       / np.diff(music), 1.7, count))
+    snaps = one_frame_steps(eased)
+    assert len(snaps) >= 10 and set(snaps[:, 1]) == {arm}
+    fixed = _without_snaps(eased.local_rot, eased.fps)
+    assert len(one_frame_steps(fixed)) == 0
+    far = np.ones(eased.n_frames, bool)
+    for frame in snaps[:, 0]:
+        far[max(frame - 3, 0):frame + 5] = False           # the 0.1 s either side the snap is spread over
+    np.testing.assert_allclose(np.abs(np.sum(fixed[far] * eased.local_rot[far], axis=-1)), 1.0, atol=1e-6)
 
 
 def test_accent_timing_refuses_amounts_that_would_halt_or_reverse_the_motion():

@@ -10,7 +10,8 @@ neighbours; a step's jump is spread over ``window_s`` either side (half of it ad
 cosine ramp, to the frames before and half taken from the frames after), so the pose before
 and after is unchanged and the jump becomes a quick movement. A jump made over two frames with
 calm frames around (the G1 retarget's arm flips, 50-70 degrees in 1/30 s: a one-frame snap once
-the dance is sampled at 30 fps) is made a one-frame step first, then mended as one.
+the dance is sampled at 30 fps), or over three (its lower arms' 40-55 degree twists in 1/20 s, which
+the accent timing plays within one frame at 30 fps), is made a one-frame step first, then mended as one.
 """
 
 from __future__ import annotations
@@ -24,7 +25,8 @@ SNAP_DEG = 15.0          # a one-frame turn this large, with calm frames around 
 ROOT_SNAP_M = 0.02       # likewise a one-frame shift of the root (at 60 fps: 1.2 m/s more than its neighbours)
 CALM = 1.0 / 3.0
 WINDOW_S = 0.1
-MAX_PASSES = 3
+MAX_PASSES = 8           # a jump over three frames takes two passes (made a step, then mended)
+SPANS = (2, 3)           # jumps made over this many frames are mended too (at 60 fps: one frame at 30 fps)
 
 
 def _isolated(d: np.ndarray, across: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
@@ -41,24 +43,57 @@ def _isolated(d: np.ndarray, across: np.ndarray, threshold: float) -> tuple[np.n
     return step, pop
 
 
-def _two_frame_steps(q: np.ndarray, d: np.ndarray, threshold: float, taken: np.ndarray) -> np.ndarray:
-    """(frame f, joint) of jumps made over frames f..f+2 with calm turns two frames either side: the turn
-    from f to f+2 exceeds ``2 * threshold``, both single turns in it are large, and it is not one of the
-    one-frame snaps in ``taken``."""
-    if len(q) < 3:
+def _short_jumps(q: np.ndarray, d: np.ndarray, threshold: float, taken: np.ndarray, n: int) -> np.ndarray:
+    """(frame f, joint) of jumps made over frames f..f+n with calm turns n frames either side: the turn
+    from f to f+n exceeds ``2 * threshold``, each single turn in it exceeds ``2 * threshold / n``, and
+    none is one of the one-frame snaps in ``taken``."""
+    if len(q) <= n:
         return np.zeros((0, 2), dtype=np.int64)
-    d2 = np.degrees(rot.angle(q[2:], q[:-2]))
-    pad = np.zeros((2,) + d2.shape[1:])
-    dp = np.concatenate([pad, d2, pad])
-    before, here, after = dp[:-4], dp[2:-2], dp[4:]
-    found = ((here > 2 * threshold) & (before <= here * CALM) & (after <= here * CALM)
-             & (d[:-1] > threshold) & (d[1:] > threshold) & ~taken[:-1] & ~taken[1:])
+    dn = np.degrees(rot.angle(q[n:], q[:-n]))
+    pad = np.zeros((n,) + dn.shape[1:])
+    dp = np.concatenate([pad, dn, pad])
+    before, here, after = dp[:-2 * n], dp[n:-n], dp[2 * n:]
+    found = (here > 2 * threshold) & (before <= here * CALM) & (after <= here * CALM)
+    for k in range(n):   # every single turn of the jump is large, and none a snap of its own
+        found &= (d[k:len(d) - n + 1 + k] > 2 * threshold / n) & ~taken[k:len(d) - n + 1 + k]
     return np.argwhere(found)
 
 
 def _ramp(n: int) -> np.ndarray:
     """n weights rising smoothly from ~0 to 1 (the last is 1)."""
     return 0.5 - 0.5 * np.cos(np.pi * np.arange(1, n + 1) / n)
+
+
+def spread_step(q: np.ndarray, f: int, j: int, w: int) -> None:
+    """Mend, in place, joint ``j``'s jump from frame f to f+1 of ``q`` (F, J, 4): half of it is added before,
+    half taken after, each with a cosine ramp over ``w`` frames, so the poses beyond are unchanged and
+    the jump becomes a quick movement."""
+    n = len(q)
+    half = rot.log(rot.mul(q[f + 1, j], rot.inv(q[f, j]))) * 0.5   # in the parent's frame
+    a, b = max(0, f - w + 1), min(n, f + 1 + w)
+    before, after = _ramp(f + 1 - a), _ramp(b - f - 1)[::-1]
+    q[a:f + 1, j] = rot.mul(rot.exp(half * before[:, None]), q[a:f + 1, j])
+    q[f + 1:b, j] = rot.mul(rot.exp(-half * after[:, None]), q[f + 1:b, j])
+
+
+def spread_steps(q: np.ndarray, fps: float, *, threshold_deg: float = 20.0, window_s: float = WINDOW_S) -> np.ndarray:
+    """``q`` (F, J, 4) without isolated one-frame snaps over ``threshold_deg``: a step is spread over
+    ``window_s`` either side (``spread_step``), a pop's frame becomes the midpoint of its neighbours. What
+    a dance's last pass does to whatever made them (a quick twist of the capture played faster, an IK
+    that swaps solutions)."""
+    if len(q) < 3:
+        return q
+    d = np.degrees(rot.angle(q[1:], q[:-1]))
+    steps, pops = _isolated(d, np.degrees(rot.angle(q[2:], q[:-2])), threshold_deg)
+    if not (steps.any() or pops.any()):
+        return q
+    out = np.array(q, dtype=np.float64)
+    w = max(1, int(round(window_s * fps)))
+    for f, j in np.argwhere(pops):
+        out[f + 1, j] = rot.nlerp(out[f, j], out[f + 2, j], 0.5)
+    for f, j in np.argwhere(steps & ~pops):
+        spread_step(out, f, j, w)
+    return out
 
 
 def remove_snaps(clip: MotionClip, *, threshold_deg: float = SNAP_DEG, window_s: float = WINDOW_S) -> tuple[MotionClip, int]:
@@ -75,16 +110,14 @@ def remove_snaps(clip: MotionClip, *, threshold_deg: float = SNAP_DEG, window_s:
             if f + 2 < n:
                 q[f + 1, j] = rot.nlerp(q[f, j], q[f + 2, j], 0.5)
                 found += 1
-        for f, j in _two_frame_steps(q, d, threshold_deg, steps | pops):
-            q[f + 1, j] = q[f, j]          # the whole jump between f+1 and f+2: a one-frame step, next pass
-            found += 1
+        taken = steps | pops
+        for span in SPANS:
+            for f, j in _short_jumps(q, d, threshold_deg, taken, span):
+                q[f + 1:f + span, j] = q[f, j]   # the whole jump in its last frame: a one-frame step, next pass
+                taken[f:f + span, j] = True      # not a longer jump's part as well
+                found += 1
         for f, j in np.argwhere(steps & ~pops):
-            jump = rot.mul(q[f + 1, j], rot.inv(q[f, j]))        # in the parent's frame
-            half = rot.log(jump) * 0.5
-            a, b = max(0, f - w + 1), min(n, f + 1 + w)
-            before, after = _ramp(f + 1 - a), _ramp(b - f - 1)[::-1]
-            q[a:f + 1, j] = rot.mul(rot.exp(half * before[:, None]), q[a:f + 1, j])
-            q[f + 1:b, j] = rot.mul(rot.exp(-half * after[:, None]), q[f + 1:b, j])
+            spread_step(q, f, j, w)
             found += 1
         v = np.diff(p, axis=0)
         steps, pops = _isolated(np.linalg.norm(v, axis=1), np.linalg.norm(p[2:] - p[:-2], axis=1), ROOT_SNAP_M)
