@@ -1,6 +1,6 @@
 """Write the benchmark's ground-truth songs: MIDI with exactly known beats, rendered by fluidsynth.
 
-    python scripts/make_groundtruth.py OUT_DIR [--quick]
+    python scripts/make_groundtruth.py OUT_DIR [--quick] [--split test|tune]
 
 For every song OUT_DIR/groundtruth-<key>/ gets NAME.mid, NAME.wav and NAME.beats.json
 ({"beats": [seconds...], "spec": {...}}). Needs fluidsynth and a General MIDI soundfont
@@ -21,9 +21,11 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("out_dir", type=Path)
     ap.add_argument("--quick", action="store_true", help="the 8-song subset")
+    ap.add_argument("--split", choices=("test", "tune"), default="test",
+                    help="test: the songs the bench reports; tune: where the engines' constants were chosen")
     args = ap.parse_args()
     try:
-        songs = ground_truth_set(args.out_dir, quick=args.quick, progress=lambda msg: print(msg, file=sys.stderr))
+        songs = ground_truth_set(args.out_dir, quick=args.quick, split=args.split, progress=lambda msg: print(msg, file=sys.stderr))
     except DanceSynthError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -63,15 +63,29 @@ def test_tempo_maps_step_and_ramp():
     assert len(bars) % 3 == 0
 
 
-def test_the_set_covers_what_the_benchmark_promises():
-    specs = gt.song_specs()
+@pytest.mark.parametrize("split", gt.SPLIT_NAMES)
+def test_the_set_covers_what_the_benchmark_promises(split):
+    specs = gt.song_specs(split=split)
     tempi = [t for s in specs for t in s.tempo]
     assert min(tempi) <= 60 and max(tempi) >= 180
     kinds = {(s.kind, s.beats_per_bar, s.drums, s.swing) for s in specs}
     assert {k[0] for k in kinds} == {"constant", "step", "ramp"}
     assert {k[1] for k in kinds} == {3, 4} and {k[2] for k in kinds} == {True, False} and any(k[3] for k in kinds)
-    quick = gt.song_specs(quick=True)
+    quick = gt.song_specs(quick=True, split=split)
     assert {s.kind for s in quick} == {"constant", "step", "ramp"} and len(quick) < len(specs)
+
+
+def test_the_reported_songs_are_not_those_the_constants_were_chosen_on():
+    """Issue 31 item 7: the bench reports the test split; the engines' constants were chosen on the tune split."""
+    tune, test = gt.song_specs(split="tune"), gt.song_specs(split="test")
+    assert len(tune) == len(test) == 25
+    assert not {s.name for s in tune} & {s.name for s in test} and not {s.seed for s in tune} & {s.seed for s in test}
+    assert not {t for s in tune for t in s.tempo} & {t for s in test for t in s.tempo}
+    from dancesynth.bench.common import BenchConfig
+
+    assert BenchConfig().groundtruth_split == BenchConfig.full().groundtruth_split == "test"
+    with pytest.raises(InputError, match="split"):
+        gt.song_specs(split="validation")
 
 
 @pytest.mark.parametrize("bad", [gt.SongSpec("x", (120, 130)), gt.SongSpec("x", (10,)),

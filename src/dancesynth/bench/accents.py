@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import MUSIC_DIR, BenchConfig, Progress, load_song, table
+from .common import MUSIC_DIR, BenchConfig, Progress, load_song, split_name, table
 from .quality import at_fps, mean_scores, mocap_scores
 
 TITLES = {"streaming": "streaming", "lookahead": "+lookahead", "signature": "+signature", "global": "global DP",
@@ -98,7 +98,8 @@ def _songs(cfg: BenchConfig, progress) -> list[dict]:
         from .groundtruth import ground_truth_set
 
         root = cfg.groundtruth_dir or _default_cache()
-        for song in ground_truth_set(root, quick=cfg.groundtruth_quick, specs=cfg.groundtruth_specs):
+        for song in ground_truth_set(root, quick=cfg.groundtruth_quick, specs=cfg.groundtruth_specs,
+                                     split=cfg.groundtruth_split):
             music = analyze_music(path=song.audio_path)
             y, sr = load_audio(song.audio_path, sr=22050, mono=True)
             out.append({"name": song.name, "set": "generated", "music": music, "beats": song.beats_s,
@@ -183,7 +184,7 @@ def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
             progress(f"accents: raw mocap of {style}")
         rows = mocap_scores(_mocap_evaluate, clips, cfg.mocap_max_clips)
         mocap[style] = rows["mean"]
-    return {"engines": list(cfg.accent_engines), "songs": per_song, "mocap": mocap,
+    return {"engines": list(cfg.accent_engines), "songs": per_song, "mocap": mocap, "split": split_name(cfg),
             "summary": summarise(per_song, mocap, cfg.accent_engines)}
 
 
@@ -227,7 +228,7 @@ def summarise(per_song: list[dict], mocap: dict, engines) -> dict:
 def format_accents(s: dict) -> str:
     blocks = []
     for subset, title in (("bundled", "bundled music (tracked beats and metre)"),
-                          ("generated", "generated songs (exact beats and bars)")):
+                          ("generated", f"generated songs (exact beats and bars; {s.get('split', 'test')} split)")):
         if subset not in s["summary"]:
             continue
         cols = s["summary"][subset]

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import BenchConfig, Progress, table
+from .common import BenchConfig, Progress, split_name, table
 
 # Tag groups of the F-measure columns: name -> predicate on a song's tags.
 TAG_GROUPS = {
@@ -65,7 +65,7 @@ def beat_tracking(cfg: BenchConfig, progress: Progress | None = None) -> dict:
     from ..eval.beat_metrics import beat_tracking_scores as score
 
     trackers = list(cfg.trackers or sorted(TRACKERS) + [STREAMING])
-    kwargs = {"quick": cfg.groundtruth_quick, "progress": progress}
+    kwargs = {"quick": cfg.groundtruth_quick, "progress": progress, "split": cfg.groundtruth_split}
     if cfg.groundtruth_specs is not None:
         kwargs["specs"] = list(cfg.groundtruth_specs)
     songs = ground_truth_set(cfg.groundtruth_dir or cache_dir() / "groundtruth", **kwargs)
@@ -102,7 +102,7 @@ def beat_tracking(cfg: BenchConfig, progress: Progress | None = None) -> dict:
         progress(f"downbeats and metre on {len(songs)} songs")
     downbeats = downbeat_tracking(songs, audio, streamed=streamed or None)
     streaming = {"latency_s": LATENCY_S, "chunk_s": STREAM_CHUNK_S, "update_every_s": STREAM_UPDATE_S}
-    return {"trackers": trackers, "songs": [s.name for s in songs], "scorer": SCORER,
+    return {"trackers": trackers, "songs": [s.name for s in songs], "scorer": SCORER, "split": split_name(cfg),
             **({"streaming": streaming} if STREAMING in trackers else {}),
             "groups": {g: sum(1 for s in songs if pred(s.tags)) for g, pred in TAG_GROUPS.items()},
             "results": results, "downbeats": downbeats}
@@ -266,7 +266,8 @@ def format_beat_tracking(s: dict) -> str:
         notes.append(f"streaming: the live tracker fed {st['chunk_s']:g} s chunks and updated every "
                      f"{st['update_every_s']:g} s; a beat is given once {st['latency_s']:g} s old (its latency)")
     text = table(
-        f"Beat tracking on {len(s['songs'])} generated songs with exact beats (MIDI rendered by fluidsynth)",
+        f"Beat tracking on {len(s['songs'])} generated songs with exact beats (MIDI rendered by fluidsynth; "
+        f"{s.get('split', 'test')} split)",
         ["tracker", "F", "CMLt", "AMLt", "P", "x real time"] + [f"F {g}" for g in groups], rows,
         [0, 3, 3, 3, 3, 0] + [3] * len(groups), notes=notes)
     return text + ("\n\n" + format_downbeat_tracking(s["downbeats"]) if "downbeats" in s else "")

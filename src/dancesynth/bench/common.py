@@ -46,6 +46,7 @@ class BenchConfig:
     seed: int = 0                       # the random walk's seed
     # 4. Beat tracking on generated ground truth.
     groundtruth_quick: bool = False
+    groundtruth_split: str = "test"         # generated songs: "test" (reported) or "tune" (where constants were chosen)
     groundtruth_specs: tuple | None = None  # SongSpecs overriding the standard set (tests)
     groundtruth_dir: Path | None = None     # cache of rendered songs (None: the dancesynth cache)
     trackers: tuple[str, ...] | None = None  # None: every tracker in TRACKERS
@@ -147,6 +148,11 @@ def cell(value, digits: int = 2) -> str:
     if isinstance(value, (float, np.floating)):
         return f"{value:.{digits}f}"
     return str(value)
+
+
+def split_name(cfg: BenchConfig) -> str:
+    """Which generated songs a section scored: a split of ``groundtruth.SPLITS``, or the caller's own."""
+    return "custom" if cfg.groundtruth_specs is not None else cfg.groundtruth_split
 
 
 def table(title: str, header: list[str], rows: list[list], digits: list[int] | None = None,

@@ -77,7 +77,7 @@ def totals(genres: dict, rows: list[dict]) -> dict:
 def _songs(cfg: BenchConfig, progress) -> list[dict]:
     specs = list(cfg.groundtruth_specs) if cfg.groundtruth_specs else None
     if specs is None:
-        specs = song_specs(quick=cfg.groundtruth_quick)
+        specs = song_specs(quick=cfg.groundtruth_quick, split=cfg.groundtruth_split)
     specs += long_specs(cfg.vocabulary_split, cfg.vocabulary_long_songs, cfg.vocabulary_long_s)
     return accent_songs(replace(cfg, groundtruth_specs=tuple(specs)), progress)
 
