@@ -3,6 +3,7 @@
     python scripts/build_motifs.py [--k 48] [--seed 0] [--epochs 100] [--skip-training]
     python scripts/build_motifs.py --evaluate          # only print the retrieval table of docs/motifs.md
     python scripts/build_motifs.py --choose-k          # the table behind the default K (docs/motifs.md)
+    python scripts/build_motifs.py --refresh-words     # after build-db mended some frames: same motifs
 
 Writes src/dancesynth/data/models/embedding_pca.npz, embedding_learned.npz and
 motifs.npz. Everything is seeded, so a rebuild on the same machine gives the same
@@ -23,7 +24,7 @@ from dancesynth.motion import embedding_train as T
 from dancesynth.motion.database import open_database
 from dancesynth.motion.embedding import embedder_path, load_embedder, save_embedder
 from dancesynth.motion.motifs import (DEFAULT_K, DEFAULT_SEED, MOTIFS_PATH, build_motif_model, chi2,
-                                      save_motif_model)
+                                      load_motif_model, refresh_motif_words, save_motif_model)
 from dancesynth.motion.words import style_words
 
 
@@ -82,8 +83,14 @@ def main() -> int:
     ap.add_argument("--skip-training", action="store_true", help="keep the shipped embeddings, rebuild motifs only")
     ap.add_argument("--evaluate", action="store_true", help="only evaluate the shipped embeddings")
     ap.add_argument("--choose-k", action="store_true", help="only print the table for choosing K")
+    ap.add_argument("--refresh-words", action="store_true",
+                    help="keep the shipped motifs; re-pick each one's real word from the database as rebuilt")
     args = ap.parse_args()
     db = open_database()
+    if args.refresh_words:
+        save_motif_model(refresh_motif_words(load_motif_model(db), db), MOTIFS_PATH)
+        print(f"wrote {MOTIFS_PATH}", file=sys.stderr)
+        return 0
     if args.choose_k:
         for kind in ("learned", "pca"):
             print(f"{kind} embedding\n" + k_table(db, load_embedder(kind)))

@@ -19,7 +19,7 @@ import hashlib
 import json
 import re
 import zipfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -215,6 +215,21 @@ def build_motif_model(database, embedder: Embedder | None = None, *, k: int = DE
 
 # ---------------------------------------------------------------------------------------------
 # Storage
+
+
+def refresh_motif_words(model: MotifModel, database) -> MotifModel:
+    """``model`` with each motif's real word re-picked, nearest its centroid, from ``database`` as it is now.
+
+    The clean-up at ``build-db`` may change a few frames of a word (a mended snap); the motifs, their
+    centroids, templates and transitions stay, so dances and the neural model keep their meaning, and
+    each motif is again a word the database has."""
+    words = [w for w in (style_words(s) for s in database.styles.values()) if len(w)]
+    feats = np.concatenate([w.features for w in words])
+    z = model.embedder.embed(feats).astype(np.float64)
+    nearest = np.argmin(((z[:, None, :] - model.centroids[None].astype(np.float64)) ** 2).sum(-1), axis=0)
+    origin = [(w.style, int(c), int(s), int(e)) for w in words for c, s, e in zip(w.clip, w.start, w.end)]
+    info = {**model.info, "motif_words": [list(origin[i]) for i in nearest]}
+    return replace(model, motif_features=feats[nearest].astype(np.float32), info=info)
 
 
 def save_motif_model(model: MotifModel, path: Path) -> None:
