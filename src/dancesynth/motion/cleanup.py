@@ -25,7 +25,8 @@ SNAP_DEG = 15.0          # a one-frame turn this large, with calm frames around 
 ROOT_SNAP_M = 0.02       # likewise a one-frame shift of the root (at 60 fps: 1.2 m/s more than its neighbours)
 CALM = 1.0 / 3.0
 WINDOW_S = 0.1
-MAX_PASSES = 8           # a jump over three frames takes two passes (made a step, then mended)
+MAX_PASSES = 8           # until nothing is left: a jump over frames takes two passes (made a step, then mended),
+                         # and a mend can bare another (J_Dance12_LushLife needs 6)
 SPANS = (2, 3)           # jumps made over this many frames are mended too (at 60 fps: one frame at 30 fps)
 
 
@@ -76,7 +77,26 @@ def spread_step(q: np.ndarray, f: int, j: int, w: int) -> None:
     q[f + 1:b, j] = rot.mul(rot.exp(-half * after[:, None]), q[f + 1:b, j])
 
 
-def spread_steps(q: np.ndarray, fps: float, *, threshold_deg: float = 20.0, window_s: float = WINDOW_S) -> np.ndarray:
+def _mend_pops(q: np.ndarray, pops: np.ndarray) -> int:
+    """Each pop's frame (f+1) becomes the midpoint of its neighbours, in place; how many."""
+    found = 0
+    for f, j in np.argwhere(pops):
+        if f + 2 < len(q):
+            q[f + 1, j] = rot.nlerp(q[f, j], q[f + 2, j], 0.5)
+            found += 1
+    return found
+
+
+def _spread_all(q: np.ndarray, steps: np.ndarray, w: int) -> int:
+    """``spread_step`` at every (frame, joint) of ``steps``, in place; how many."""
+    where = np.argwhere(steps)
+    for f, j in where:
+        spread_step(q, f, j, w)
+    return len(where)
+
+
+def spread_steps(q: np.ndarray, fps: float, *, threshold_deg: float = 20.0,
+                 window_s: float = WINDOW_S) -> np.ndarray:
     """``q`` (F, J, 4) without isolated one-frame snaps over ``threshold_deg``: a step is spread over
     ``window_s`` either side (``spread_step``), a pop's frame becomes the midpoint of its neighbours. What
     a dance's last pass does to whatever made them (a quick twist of the capture played faster, an IK
@@ -88,37 +108,29 @@ def spread_steps(q: np.ndarray, fps: float, *, threshold_deg: float = 20.0, wind
     if not (steps.any() or pops.any()):
         return q
     out = np.array(q, dtype=np.float64)
-    w = max(1, int(round(window_s * fps)))
-    for f, j in np.argwhere(pops):
-        out[f + 1, j] = rot.nlerp(out[f, j], out[f + 2, j], 0.5)
-    for f, j in np.argwhere(steps & ~pops):
-        spread_step(out, f, j, w)
+    _mend_pops(out, pops)
+    _spread_all(out, steps & ~pops, max(1, int(round(window_s * fps))))
     return out
 
 
-def remove_snaps(clip: MotionClip, *, threshold_deg: float = SNAP_DEG, window_s: float = WINDOW_S) -> tuple[MotionClip, int]:
+def remove_snaps(clip: MotionClip, *, threshold_deg: float = SNAP_DEG,
+                 window_s: float = WINDOW_S) -> tuple[MotionClip, int]:
     """``clip`` with its one-frame snaps mended, and how many were mended."""
     q = np.array(clip.local_rot, dtype=np.float64)
     p = np.array(clip.root_pos, dtype=np.float64)
     w = max(1, int(round(window_s * clip.fps)))
     n, mended = len(q), 0
     for _ in range(MAX_PASSES):
-        found = 0
         d = np.degrees(rot.angle(q[1:], q[:-1]))
         steps, pops = _isolated(d, np.degrees(rot.angle(q[2:], q[:-2])), threshold_deg)
-        for f, j in np.argwhere(pops):
-            if f + 2 < n:
-                q[f + 1, j] = rot.nlerp(q[f, j], q[f + 2, j], 0.5)
-                found += 1
+        found = _mend_pops(q, pops)
         taken = steps | pops
         for span in SPANS:
             for f, j in _short_jumps(q, d, threshold_deg, taken, span):
                 q[f + 1:f + span, j] = q[f, j]   # the whole jump in its last frame: a one-frame step, next pass
                 taken[f:f + span, j] = True      # not a longer jump's part as well
                 found += 1
-        for f, j in np.argwhere(steps & ~pops):
-            spread_step(q, f, j, w)
-            found += 1
+        found += _spread_all(q, steps & ~pops, w)
         v = np.diff(p, axis=0)
         steps, pops = _isolated(np.linalg.norm(v, axis=1), np.linalg.norm(p[2:] - p[:-2], axis=1), ROOT_SNAP_M)
         for f in np.flatnonzero(steps | pops):
