@@ -144,9 +144,14 @@ def _uneased(name: str, clip, song: dict, db, seed: int) -> dict:
     """The accents of the same engine's dance with the accent timing off, in the same style: on the same path
     (``same_path`` says whether it was), what the path's own stops give without the easing."""
     from .dances import engine_dances, same_path
+    from .quality import walk_dance
     from ..eval.evaluate import evaluate
 
-    plain = engine_dances(song["music"], db, seed, [name], style=clip.provenance.style, accent_timing=False)[name]
+    if name == "random_walk":   # its style and level are the eased walk's: no reference dance to make again
+        plain = walk_dance(db.styles[clip.provenance.style], song["music"],
+                           subdivide=clip.provenance.summary["subdivide"], seed=seed, fps=clip.fps, accent_timing=False)
+    else:
+        plain = engine_dances(song["music"], db, seed, [name], style=clip.provenance.style, accent_timing=False)[name]
     r = evaluate(plain, music_beats_s=song["beats"])
     return {**{k: r.get(k) for k in ACCENT_KEYS}, "same_path": float(same_path(clip, plain))}
 
