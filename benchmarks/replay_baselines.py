@@ -37,7 +37,8 @@ def looped_take(style, beat_times_s) -> float:
     from dancesynth.eval.repetition import repetition
 
     c = int(np.argmax(np.diff(style.clip_starts)))
-    beats = np.count_nonzero((style.beat_frames >= style.clip_starts[c]) & (style.beat_frames < style.clip_starts[c + 1]))
+    first, end = style.clip_starts[c], style.clip_starts[c + 1]
+    beats = np.count_nonzero((style.beat_frames >= first) & (style.beat_frames < end))
     ids = [("take", i % max(beats, 1)) for i in range(len(beat_times_s))]
     return repetition(ids, beat_times_s)["replayed_share"]
 
@@ -58,7 +59,8 @@ def main() -> int:
     from dancesynth.motion.database import open_database
 
     t0 = time.perf_counter()
-    cfg = replace(BenchConfig.quick(), accent_songs=(), groundtruth_specs=tuple(long_specs(args.split, args.count, 180.0)))
+    cfg = replace(BenchConfig.quick(), accent_songs=(),
+                  groundtruth_specs=tuple(long_specs(args.split, args.count, 180.0)))
     songs = [s for s in _songs(cfg, lambda m: print(m, file=sys.stderr)) if s["set"] == "generated"]
     db = open_database()
     rows = []

@@ -236,7 +236,8 @@ def main() -> None:
                 head.wait()
                 shutil.rmtree(temp, ignore_errors=True)
         append_rate = manifest_append_rate(tmp)
-        extra = {"rerun_nothing_to_do_s": rerun_s, "startup": startup(), "neural": neural_speed(MUSIC / "Kevin_MacLeod_-_Vibe_Ace.ogg", tmp)}
+        extra = {"rerun_nothing_to_do_s": rerun_s, "startup": startup(),
+                 "neural": neural_speed(MUSIC / "Kevin_MacLeod_-_Vibe_Ace.ogg", tmp)}
     result = {"songs": len(songs), "music_minutes": music_s / 60.0, "rows": rows, "ray": ray,
               "manifest_appends_per_s": append_rate, **extra,
               "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),

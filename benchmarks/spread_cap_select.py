@@ -5,8 +5,8 @@
 The post-filter (``engines.neural.data.restore_spread``) widens the network's damped motion toward
 the training data's spread by at most ``SPREAD_CAP``. The bench reports the neural engine on the
 bundled songs, seeds 0-2, against the salsa take the model never saw (60_09 / 61_09). This script
-touches none of that: it dances the generated songs of the ``tune`` split (8 of them, 62-180 bpm
-kinds, tuning seeds 100 and up) at each cap and compares the dances with the salsa takes the model
+touches none of that: it dances the generated songs of the ``tune`` split (its 8 quick songs, 60-180
+bpm, every kind; tuning seeds 100 and up) at each cap and compares the dances with the salsa takes the model
 *was* trained on (held-out take excluded): FID_k and FID_g against them (the spread the filter restores
 is theirs), p99 joint speed and root travel as ratios to theirs, hands in the head, one-frame steps,
 accents against chance. The chosen cap has the lowest FID_k + FID_g (each relative to the network
@@ -68,7 +68,8 @@ def main() -> None:
             m, a = mean_scores(live), mean_scores(acc)
             rows[cap] = {"joint_speed_p99_vs_train": m["joint_speed_p99"] / ref["joint_speed_p99"],
                          "root_travel_vs_train": m["root_travel_m_per_min"] / ref["root_travel_m_per_min"],
-                         "hand_in_head": m["hand_in_head"], "one_frame_steps": int(sum(r["one_frame_steps"] for r in live)),
+                         "hand_in_head": m["hand_in_head"],
+                         "one_frame_steps": int(sum(r["one_frame_steps"] for r in live)),
                          "accent_precision_x_chance": a["accent_precision_x_chance"],
                          "accent_recall_x_chance": a["accent_recall_x_chance"], "dances": len(live)}
     finally:

@@ -25,7 +25,8 @@ def main() -> int:
                     help="test: the songs the bench reports; tune: where the engines' constants were chosen")
     args = ap.parse_args()
     try:
-        songs = ground_truth_set(args.out_dir, quick=args.quick, split=args.split, progress=lambda msg: print(msg, file=sys.stderr))
+        songs = ground_truth_set(args.out_dir, quick=args.quick, split=args.split,
+                                 progress=lambda msg: print(msg, file=sys.stderr))
     except DanceSynthError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

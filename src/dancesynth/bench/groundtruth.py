@@ -104,8 +104,8 @@ class GroundTruthSong:
 #: and no choice looked at it. Per kind: tempi (one tuple of tempi per song), and the first seed.
 SPLITS = {
     "tune": {"const_drums": ((60,), (80,), (100,), (120,), (140,), (160,), (180,)),
-             "const_nodrums": ((70,), (110,), (150,)), "waltz_drums": ((90,), (135,)), "waltz_nodrums": ((100,), (160,)), "swing_drums": ((95,), (125,), (155,)),
-             "swing_nodrums": ((115,),), "step": ((90, 120), (140, 100), (75, 110), (120, 150)),
+             "const_nodrums": ((70,), (110,), (150,)), "waltz_drums": ((90,), (135,)),
+             "waltz_nodrums": ((100,), (160,)), "swing_drums": ((95,), (125,), (155,)), "swing_nodrums": ((115,),), "step": ((90, 120), (140, 100), (75, 110), (120, 150)),
              "ramp": ((80, 130), (160, 110), (100, 140)), "seed": 0},
     "test": {"const_drums": ((58,), (84,), (106,), (128,), (146,), (166,), (182,)),
              "const_nodrums": ((74,), (114,), (154,)), "waltz_drums": ((94,), (138,)),
