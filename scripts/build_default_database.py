@@ -12,7 +12,8 @@ import shutil
 import sys
 from pathlib import Path
 
-from dancesynth.motion.database import BUNDLED_DATABASE, build_database, collect_sources, manifest_options, save_database
+from dancesynth.motion.database import BUNDLED_DATABASE, build_database, save_database
+from dancesynth.motion.sources import collect_sources, manifest_options
 
 REPO = Path(__file__).resolve().parents[1]
 LICENCES = ["CMU_LICENSE.txt", "yuki-koyama_bvh11_LICENSE.txt",

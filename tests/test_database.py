@@ -13,8 +13,8 @@ from dancesynth import rotations as rot
 from dancesynth.engines.graph.cache import graph_path, load_graph
 from dancesynth.engines.graph.meta_graph import GraphConfig
 from dancesynth.errors import InputError, ModelError
-from dancesynth.motion.database import (build_database, collect_sources, load_database, open_database,
-                                        save_database)
+from dancesynth.motion.database import build_database, load_database, open_database, save_database
+from dancesynth.motion.sources import MOTION_SUFFIXES, collect_sources
 
 FIXTURES = REPO / "tests" / "data" / "mocap"
 
@@ -136,3 +136,9 @@ def test_a_folder_of_bvh_is_built_once_and_rebuilt_after_an_edit(tmp_path, cache
     os.utime(bvh, (bvh.stat().st_atime, bvh.stat().st_mtime + 10))
     open_database(folder)
     assert len(list((cache / "databases").iterdir())) == 2
+
+
+def test_the_database_reads_every_suffix_the_motion_readers_know():
+    from dancesynth.io.motion_files import MOTION_SUFFIXES as READERS
+
+    assert MOTION_SUFFIXES == READERS

@@ -14,7 +14,8 @@ from bvh_samples import TWO_JOINTS
 from dancesynth.engines.procedural.config import load_config
 from dancesynth.errors import DanceSynthError, InputError
 from dancesynth.io.bvh import parse_bvh
-from dancesynth.motion.database import BUNDLED_DATABASE, collect_sources, load_database, open_database
+from dancesynth.motion.database import BUNDLED_DATABASE, load_database, open_database
+from dancesynth.motion.sources import collect_sources
 
 
 @pytest.mark.parametrize("value", ["nan", "inf", "-inf", '"nan"', '"inf"'])

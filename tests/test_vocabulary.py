@@ -300,7 +300,8 @@ def test_holding_a_clip_out_takes_its_mirror_image_with_it(bundled_db):
 
 
 def test_a_manifest_mirrors_a_genre_and_the_flag_survives_saving(tmp_path):
-    from dancesynth.motion.database import build_database, collect_sources, load_database, manifest_options
+    from dancesynth.motion.database import build_database, load_database
+    from dancesynth.motion.sources import collect_sources, manifest_options
 
     folder = tmp_path / "mine"
     (folder / "salsa").mkdir(parents=True)

@@ -176,7 +176,8 @@ def print_tempo_map(database, step: int) -> None:
               help="A genres.toml mapping genres to file patterns (default: SOURCE/genres.toml or sub-folders).")
 def build_db(source, output, beats, snap, manifest):
     """Analyse a folder of BVH files (one sub-folder per genre, or a genres.toml) into a database."""
-    from .motion.database import AnalysisConfig, build_database, collect_sources, manifest_options, save_database
+    from .motion.database import AnalysisConfig, build_database, save_database
+    from .motion.sources import collect_sources, manifest_options
 
     sources = collect_sources(source, manifest)
     options = manifest_options(source, manifest)

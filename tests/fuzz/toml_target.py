@@ -75,7 +75,7 @@ class TomlTarget(Target):
     def run(self, case: Case, workdir: Path) -> None:
         kind, data = case.data
         if kind == "genres":
-            from dancesynth.motion.database import collect_sources
+            from dancesynth.motion.sources import collect_sources
 
             folder = workdir / "toml_db"
             (folder / "genres.toml").write_bytes(data)
