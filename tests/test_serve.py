@@ -315,7 +315,7 @@ def test_an_uploaded_song_is_kept_while_its_video_renders(server, tmp_path):
 
 
 def test_an_upload_held_for_a_video_is_not_removed_to_make_room():
-    from dancesynth.web.server import UploadStore
+    from dancesynth.web.uploads import UploadStore
 
     store = UploadStore(max_files=1)
     try:
@@ -778,7 +778,7 @@ def test_a_busy_server_says_so_with_retry_after_and_holds_a_bounded_queue():
 def test_an_upload_being_sent_is_not_removed_to_make_room():
     """The audio_url answered 404 or 500 when the upload was pruned between looking it up and sending it:
     it counted as served (free to go) before it was sent. Now it is served once the response is done."""
-    from dancesynth.web.server import UploadStore
+    from dancesynth.web.uploads import UploadStore
 
     store = UploadStore(max_files=2)
     try:
