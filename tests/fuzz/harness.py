@@ -420,8 +420,8 @@ TARGETS = {
     "web": "fuzz.web_target",
     "character_gltf": "fuzz.character_target:GLTF",
     "character_vrm": "fuzz.character_target:VRM",
-    "character_bvh": "fuzz.character_target:BVH_RIG",
-    "character_bonemap": "fuzz.character_target:BONE_MAP",
+    "character_bvh": "fuzz.rig_target:BVH_RIG",
+    "character_bonemap": "fuzz.rig_target:BONE_MAP",
 }
 
 
