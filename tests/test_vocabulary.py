@@ -376,7 +376,7 @@ def test_fast_songs_are_not_rushed_by_the_accent_timing(bundled_db):
     song = replace(song, beats_per_bar=4, beat_in_bar=np.arange(song.n_beats) % 4)   # the "1" eased hardest
     peaks, limit = {}, EngineConfig().ease_max_rate
     for cap in (limit, None):
-        clip = dance(song, database=bundled_db, render=EngineConfig(ease_max_rate=cap))
+        clip = dance(song, database=bundled_db, render=EngineConfig(ease_max_rate=cap, ease_speed_percentile=None))
         st = bundled_db.styles[clip.provenance.style]
         src = np.asarray(clip.provenance.source_frames)      # the playback rate, away from the jumps
         step = np.abs(np.diff(src))

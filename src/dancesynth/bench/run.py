@@ -271,6 +271,9 @@ TARGETS = {
                                                                                  max), 1.0),
     **{f"{what} / mocap's, furthest from 1 (mean per engine and set)": ("accents", _furthest(key), 0.25)
        for what, key in (("p99 joint speed", "joint_speed_p99_vs_mocap"), ("root travel", "root_travel_vs_mocap"))},
+    # Issue 31 item 5: the speed guard on every song, not on average.
+    "p99 joint speed / the style's mocap's, every engine and song, furthest from 1": (
+        "accents", _every_dance("joint_speed_p99_vs_mocap", lambda xs: max(abs(x - 1.0) for x in xs if x)), 0.25),
     **{f"{what} / the style's mocap's, highest (mean per engine and set)": ("accents", _furthest(key, 0.0), 1.1)
        for what, key in (("foot speed on the floor", "foot_skate_vs_mocap"), ("PFC", "pfc_vs_mocap"))},
     "one-frame joint steps over 30°, every engine and song": ("accents", _every_dance("one_frame_steps", sum), 0),

@@ -44,7 +44,9 @@ class Pieces:
     ``count0``/``count1``: the music beats counted at t0 and t1 (``BeatGrid.count``; a piece
     on a subdivided grid spans half a beat, on a merged one two). None: one beat each.
     ``ease0``/``ease1``: how much the accent timing (``timing.ease``) slows the motion on the beat
-    at t0 and at t1. None: no easing, each piece at one rate (the paper).
+    at t0 and at t1. None: no easing, each piece at one rate (the paper). ``shown`` (K, N), where
+    given, replaces the easing's formula: the share of each piece's source shown at N evenly spaced
+    points of its music time (``timing.within_room``), linear between.
     """
 
     t0: np.ndarray
@@ -56,6 +58,7 @@ class Pieces:
     count1: np.ndarray | None = None
     ease0: np.ndarray | None = None
     ease1: np.ndarray | None = None
+    shown: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t0)
@@ -69,6 +72,22 @@ class Pieces:
                   else (self.ease0[k], self.ease1[k]))
         return c0, c1, e0, e1
 
+    def show(self, u: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """The share of piece ``k``'s source shown at ``u`` (0..1) of its music time."""
+        if self.shown is None:
+            return ease(u, *self.timing(k))
+        n = self.shown.shape[1] - 1
+        x = np.clip(u, 0.0, 1.0) * n
+        i = np.minimum(x.astype(np.int64), n - 1)
+        return self.shown[k, i] + (x - i) * (self.shown[k, i + 1] - self.shown[k, i])
+
+    def end_rates(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each piece's playback rate at its start and its end, relative to its mean."""
+        if self.shown is None:
+            return tuple(ease_rate(np.array([[0.0], [1.0]]), *self.timing(np.arange(len(self)))))
+        n = self.shown.shape[1] - 1
+        return (self.shown[:, 1] - self.shown[:, 0]) * n, (self.shown[:, -1] - self.shown[:, -2]) * n
+
 
 #: Fastest angular acceleration an inertialization decay may add (rad/s^2): about what
 #: the mocap itself reaches in its roughest 1 % of frames, so a decay hides in the motion.
@@ -79,6 +98,13 @@ BLEND_ACCEL_RAD_S2 = 300.0
 BLEND_ACCEL_M_S2 = np.array([6.0, 30.0, 6.0])
 #: No decay lasts longer (s): past this the two motions are mixed for too long.
 BLEND_MAX_S = 1.0
+#: Fastest a decay may move the end of a limb by itself (m/s): a large offset decays over
+#: longer, so a stitch between two different poses does not whip the limb across (the
+#: choreography's stitches made 60-80 % of its fastest joint motion, 1.2-1.4x the mocap's p99).
+BLEND_SPEED_M_S = 1.0
+#: ... but it lasts no longer than this for it (s): longer, the two words blur into one (up to 1 s,
+#: a re-created dance's motifs were found again in its motion on 0.69 of beats, 0.82 without the limit).
+BLEND_UNHURRIED_S = 0.4
 #: How far a carried velocity difference may swing a joint past its offset before the
 #: decay brings it back (rad): more of a violent difference is dropped instead, so it
 #: cannot overshoot into a pose neither motion has.
@@ -281,7 +307,7 @@ def _jumps_of(style: Style, pieces: Pieces, state: StitchState, yaw: float, star
     return jumps
 
 
-def _blend_rotations(old, new, jumps: list, blend_s: float, fps: float):
+def _blend_rotations(old, new, jumps: list, blend_s: float, fps: float, reach):
     """The rotation part of the inertialization at each of ``jumps``: offsets (m, J, 3), their
     velocities and decay times (m, J).
 
@@ -290,7 +316,7 @@ def _blend_rotations(old, new, jumps: list, blend_s: float, fps: float):
     not be blended in), each extrapolated to ``t0`` at its own angular velocity. The offset is
     ``log(old * new^-1)`` per joint; its velocity is the offset's own rate of change, so decaying
     it in rotation-vector space keeps the shown angular velocity continuous however far apart
-    the poses are.
+    the poses are. ``reach`` (J,): each joint's ``limb_reach``, how far its turn moves the limb's end.
     """
     dt = 1.0 / fps
     both = np.stack([old, new], axis=1)  # (jump, old/new, frame, J, 4)
@@ -310,7 +336,26 @@ def _blend_rotations(old, new, jumps: list, blend_s: float, fps: float):
     size, speed = np.linalg.norm(x0, axis=-1), np.linalg.norm(v0, axis=-1)
     carried = np.minimum(speed, carried_speed(size, BLEND_ACCEL_RAD_S2, BLEND_MAX_SWING_RAD))
     v0 *= (carried / np.maximum(speed, 1e-9))[..., None]
-    return x0, v0, decay_time(size, carried, blend_s, BLEND_ACCEL_RAD_S2)
+    return x0, v0, unhurried(decay_time(size, carried, blend_s, BLEND_ACCEL_RAD_S2), size * reach)
+
+
+def unhurried(duration, swept):
+    """``duration`` long enough that the decay of an offset sweeping ``swept`` (m: its angle times the
+    limb it turns) moves it no faster than ``BLEND_SPEED_M_S``: a Hermite decay peaks
+    at 1.5 times its mean speed."""
+    return np.minimum(np.maximum(duration, 1.5 * np.asarray(swept, float) / BLEND_SPEED_M_S),
+                      np.maximum(duration, BLEND_UNHURRIED_S))
+
+
+def limb_reach(skeleton) -> np.ndarray:
+    """(J,) how far each joint's limb reaches beyond it (m): the longest chain of bones below it."""
+    reach = np.zeros(skeleton.n_joints)
+    for j, end in skeleton.end_sites.items():
+        reach[j] = np.linalg.norm(end)
+    for j in range(skeleton.n_joints - 1, 0, -1):
+        p = skeleton.parents[j]
+        reach[p] = max(reach[p], reach[j] + np.linalg.norm(skeleton.offsets[j]))
+    return reach
 
 
 def _blend_positions(old_root, new_root, jump: _Jump, blend_s: float, fps: float):
@@ -323,8 +368,8 @@ def _blend_positions(old_root, new_root, jump: _Jump, blend_s: float, fps: float
     across, up = [0, 2], [1]
     size = np.array([np.linalg.norm(p0[across]), np.linalg.norm(p0[up])])
     speed = np.array([np.linalg.norm(pv0[across]), np.linalg.norm(pv0[up])])
-    duration = decay_time(size, speed, blend_s, BLEND_ACCEL_M_S2[[0, 1]])
-    return p0, pv0, duration[[0, 1, 0]]
+    duration = decay_time(size, speed, blend_s, BLEND_ACCEL_M_S2[[0, 1]])   # not ``unhurried``: the body
+    return p0, pv0, duration[[0, 1, 0]]                                      # would glide over held feet
 
 
 def _jump_frames(jumps: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -356,12 +401,13 @@ def _place_jumps(style: Style, jumps: dict, local, root, state: StitchState, ank
     m = len(order)
     local, root = local.reshape(m, 2, 3, *local.shape[1:]), root.reshape(m, 2, 3, 3)  # jump, old/new, frame
     times = np.array([np.r_[j.t0, j.t_old] for j in order])  # of the old motion's three frames
-    rotations, shown = _chain_rotations(local[:, 0], local[:, 1], order, times, state.blend, blend_s, fps)
+    rotations, shown = _chain_rotations(local[:, 0], local[:, 1], order, times, state.blend, blend_s, fps,
+                                        limb_reach(style.skeleton))
     feet = _feet_steps(style, ankles, order, shown, local[:, 1, 0])
     return _chain_positions(root, order, times, feet, rotations, state, blend_s, fps)
 
 
-def _chain_rotations(old, new, jumps: list, times, blend: Blend | None, blend_s: float, fps: float, *,
+def _chain_rotations(old, new, jumps: list, times, blend: Blend | None, blend_s: float, fps: float, reach, *,
                      batch: bool = True):
     """The rotation part of each jump's blend (``Blend`` without positions), and the old motion's pose at
     each jump's ``t0`` as shown (m, J, 4).
@@ -380,7 +426,7 @@ def _chain_rotations(old, new, jumps: list, times, blend: Blend | None, blend_s:
     prior[0] = blend is not None
     guess = old.copy()
     guess[prior] = rot.mul(rot.IDENTITY, old[prior])  # exp of zero offsets
-    found = _blend_rotations(guess[:, 1:], new[:, 1:], jumps, blend_s, fps)
+    found = _blend_rotations(guess[:, 1:], new[:, 1:], jumps, blend_s, fps, reach)
     blends = [Blend(j.t0, found[2][i], found[0][i], found[1][i], None, None, None) for i, j in enumerate(jumps)]
     previous = [blend] + blends[:-1]
     shown = old.copy()
@@ -393,7 +439,8 @@ def _chain_rotations(old, new, jumps: list, times, blend: Blend | None, blend_s:
         # One by one from here: the previous blend as it really is.
         if i and not same[i]:
             shown[i] = rot.mul(rot.exp(blends[i - 1].rot_at(times[i])), old[i])
-        x0, v0, duration = _blend_rotations(shown[i:i + 1, 1:], new[i:i + 1, 1:], jumps[i:i + 1], blend_s, fps)
+        x0, v0, duration = _blend_rotations(shown[i:i + 1, 1:], new[i:i + 1, 1:], jumps[i:i + 1], blend_s, fps,
+                                            reach)
         blends[i] = Blend(jumps[i].t0, duration[0], x0[0], v0[0], None, None, None)
         same[i + 1:] = False
     return blends, shown[:, 0]
@@ -479,7 +526,7 @@ def render(style: Style, pieces: Pieces, state: StitchState, *, fps: float, end_
     Returns ``(state, Rendered)``.
     """
     k_pieces = len(pieces)
-    start_rate, end_rate = ease_rate(np.array([[0.0], [1.0]]), *pieces.timing(np.arange(k_pieces)))
+    start_rate, end_rate = pieces.end_rates()
     st = state
     if k_pieces and st.last_f1 is None:
         # The very first piece: start at the origin, facing +Z.
@@ -502,7 +549,7 @@ def render(style: Style, pieces: Pieces, state: StitchState, *, fps: float, end_
     t = idx / fps
     k = np.clip(np.searchsorted(pieces.t1, t, side="right"), 0, k_pieces - 1)
     u = (t - pieces.t0[k]) / (pieces.t1[k] - pieces.t0[k])
-    u = ease(u, *pieces.timing(k))
+    u = pieces.show(u, k)
     src = pieces.f0[k] + u * (pieces.f1[k] - pieces.f0[k])
     clip = style.clip_of_frame(pieces.f0.astype(np.int64))[k]
     src = np.clip(src, style.clip_starts[clip], style.clip_starts[clip + 1] - 1)

@@ -2,11 +2,14 @@
 
 The paper plays each beat-to-beat piece at one rate (its source beat frames warped onto the music
 beats). ``ease`` plays it slower on each beat and faster between, so the motion settles into every
-beat; ``beat_ease`` says how hard each beat is hit (the bar's "1" hardest) and ``ease_within``
-keeps the easing from playing a piece faster than the mocap allows. ``stitch.render`` applies it.
+beat; ``beat_ease`` says how hard each beat is hit (the bar's "1" hardest), ``ease_within``
+keeps the easing from playing a piece much faster than captured and ``within_room`` any frame faster
+than the style's own fast frames. ``stitch.render`` applies it.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -61,9 +64,8 @@ def ease_within(ease, rates, max_rate: float | None, count=None) -> np.ndarray:
     grows with the easing, so the easing of both ends of the piece is scaled by ``lambda_k`` to keep
     ``rate_k * (1 + lambda_k (peak_k - 1)) <= max_rate`` (``lambda_k`` = 0: a piece already warped past
     ``max_rate`` is played evenly), and each beat takes the smaller scale of the two pieces it joins
-    (the rate stays continuous there). A bar's "1" keeps its extra weight against its neighbours; the
-    easing takes only the speed headroom the pieces have left, and fast songs are not rushed. None: no
-    limit."""
+    (the rate stays continuous there). A bar's "1" keeps its extra weight against its neighbours. None:
+    no limit. (``within_room`` then keeps each frame within the style's own speeds.)"""
     ease = np.asarray(ease, dtype=np.float64)
     if max_rate is None or ease.size < 2:
         return ease
@@ -73,6 +75,118 @@ def ease_within(ease, rates, max_rate: float | None, count=None) -> np.ndarray:
     rates = np.maximum(np.asarray(rates, dtype=np.float64), 1e-9)
     scale = np.clip((max_rate / rates - 1.0) / np.maximum(peak - 1.0, 1e-9), 0.0, 1.0)
     return ease * np.minimum(np.r_[scale[0], scale], np.r_[scale, scale[-1]])
+
+
+@dataclass(frozen=True)
+class SpeedRoom:
+    """How fast a style's source moves, for ``within_room``: ``speed`` (F,) its fastest joint's speed per
+    frame as captured (m/s, ``motion.accents.peak_speeds``) and ``limit``, the speed (m/s) the easing may
+    not push a frame past: the style's own ``percentile`` of ``speed``."""
+
+    speed: np.ndarray
+    limit: float
+
+    @classmethod
+    def of(cls, speed: np.ndarray, percentile: float) -> "SpeedRoom":
+        speed = np.asarray(speed, dtype=np.float64)
+        return cls(speed, float(np.percentile(speed, percentile)) if speed.size else np.inf)
+
+    def at(self, frames: np.ndarray) -> np.ndarray:
+        return self.speed[np.clip(np.rint(frames).astype(np.int64), 0, len(self.speed) - 1)]
+
+
+ROOM_SAMPLES = 65  # per piece: finer than a beat piece's source frames at 60 fps
+
+
+def within_room(ease, count, f0, f1, rates, room: SpeedRoom) -> np.ndarray:
+    """(K, ROOM_SAMPLES) the share of each piece's source shown at evenly spaced points of its music time:
+    ``ease``'s timing (``ease`` and ``count`` (K+1,) per grid beat, as ``ease_within``'s) with the easing
+    taking only the speed headroom each frame has. The eased rate ``r(u)`` would play a source frame of
+    speed ``v`` at ``v * rate_k * r(u)``; where that passes ``room.limit`` the rate is held at the limit
+    (never below the even rate or the eased one), and the source time it no longer shows is shown
+    instead between the beats where the piece moves slowly: the rate there is ``kappa * r(u)``, ``kappa``
+    >= 1 solved so the piece still spans its beat (``_fill``). The stop on each beat stays while the
+    piece's fast moves are played no faster than the mocap's own fast moves; the cosine's amplitude
+    scaled down instead (``ease_within``) costs the same speed a third of the accents. A piece that
+    cannot fit at all is played evenly."""
+    ease, count = np.asarray(ease, dtype=np.float64), np.asarray(count, dtype=np.float64)
+    f0, f1 = np.asarray(f0, dtype=np.float64), np.asarray(f1, dtype=np.float64)
+    rates = np.maximum(np.asarray(rates, dtype=np.float64), 1e-9)
+    u = np.linspace(0.0, 1.0, ROOM_SAMPLES)[:, None]
+    shown, wanted = _timing(u, count[:-1], count[1:], ease[:-1], ease[1:])   # (N, K)
+    floor = np.minimum(wanted, 1.0)
+    rate = wanted
+    for _ in range(3):   # the frames shown move as the rate changes: look again
+        speed = _spread(room.at(f0 + shown * (f1 - f0)), np.maximum, 2 * SMOOTH)
+        rate, fits = _fill(wanted, np.maximum(room.limit / np.maximum(speed * rates, 1e-9), floor))
+        held = wanted * _spread(rate / wanted, np.add, SMOOTH) / (2 * SMOOTH + 1)   # the hold smoothed, not
+        rate = np.where(fits, held / _mean(held), 1.0)                             # the stops
+        shown = _integrate(rate)
+    return shown.T
+
+
+SMOOTH = 2  # samples each side: the hold on the rate changes smoothly, so it adds no stops of its own
+
+
+def _spread(x: np.ndarray, op, half: int) -> np.ndarray:
+    """``op`` (np.maximum or np.add) of each sample of axis 0 with its ``half`` neighbours each side, the
+    ends repeated. A fast frame caps the rate a little before and after it, so the smoothed rate still
+    holds it."""
+    padded = np.concatenate([np.repeat(x[:1], half, axis=0), x, np.repeat(x[-1:], half, axis=0)])
+    out = padded[:len(x)].copy()
+    for i in range(1, 2 * half + 1):
+        out = op(out, padded[i:i + len(x)])
+    return out
+
+
+def _mean(x: np.ndarray) -> np.ndarray:
+    """Trapezoid mean over the evenly spaced samples of axis 0."""
+    return (x[1:] + x[:-1]).sum(axis=0) / (2.0 * (len(x) - 1))
+
+
+def _fill(wanted: np.ndarray, cap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``min(wanted, cap)``, the part between the beats (``wanted`` >= 1) scaled by ``kappa`` >= 1 per
+    column so the mean is 1: the time the cap saves is shown between the beats, and the stops on them
+    stay as eased. Where that part cannot take it, the whole column is scaled; where nothing up to
+    ``kappa`` = 4 can, the column is even (1). Also returns whether it fit."""
+    between = wanted >= 1.0
+    rate, fits = _scaled(wanted, cap, between)
+    everywhere, fits_everywhere = _scaled(wanted, cap, np.ones_like(between))
+    rate = np.where(fits, rate, np.where(fits_everywhere, everywhere, 1.0))
+    return rate, fits | fits_everywhere
+
+
+def _scaled(wanted, cap, scaled) -> tuple[np.ndarray, np.ndarray]:
+    """``min(kappa * wanted, cap)`` where ``scaled``, ``min(wanted, cap)`` elsewhere, ``kappa`` in [1, 4]
+    making each column's mean 1 (bisection); and whether it could."""
+    def at(kappa):
+        return np.minimum(np.where(scaled, kappa * wanted, wanted), cap)
+
+    lo, hi = np.ones(wanted.shape[1]), np.full(wanted.shape[1], 4.0)
+    fits = _mean(at(hi)) >= 1.0
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        short = _mean(at(mid)) < 1.0
+        lo, hi = np.where(short, mid, lo), np.where(short, hi, mid)
+    rate = at(hi)
+    return rate / _mean(rate), fits
+
+
+def _integrate(rate: np.ndarray) -> np.ndarray:
+    """The share shown at each sample of a rate that means 1 (trapezoid), ending exactly at 1."""
+    cum = np.r_[np.zeros((1, rate.shape[1])), np.cumsum(rate[1:] + rate[:-1], axis=0)]
+    return cum / cum[-1]
+
+
+def speed_room(style, config) -> SpeedRoom | None:
+    """``style``'s ``SpeedRoom`` at ``config.ease_speed_percentile`` (an engine's or the mixer's; None:
+    none), its speeds analysed once per style and kept on disk."""
+    from ..motion.accents import cached_peak_speeds
+
+    pct = config.ease_speed_percentile
+    if pct is None or not (config.ease_beats or config.ease_downbeat):
+        return None
+    return SpeedRoom.of(cached_peak_speeds(style), pct)
 
 
 def plain_timing(config):

@@ -188,6 +188,34 @@ def foot_slide(style) -> np.ndarray:
 def cached_accent_beats(style, *, window: float = 0.35) -> AccentBeats:
     """``accent_beats`` kept on disk by the style's fingerprint (finding the stops runs forward
     kinematics over the whole style, seconds for a large one; every dance needs them)."""
+    z = _cached(style, f"{window:g}", lambda: vars(accent_beats(style, window=window)))
+    return AccentBeats(z["frame"], z["strength"], z["offbeat"], z["slide"])
+
+
+def peak_speeds(style) -> np.ndarray:
+    """(F,) per frame of ``style``: its fastest joint's speed (m/s) as captured, the faster of the
+    steps into and out of the frame. What the accent timing may not push past the style's own
+    fast frames (``timing.SpeedRoom``)."""
+    sk = style.skeleton
+    out = np.zeros(style.n_frames)
+    for c in range(style.n_clips):
+        a, b = int(style.clip_starts[c]), int(style.clip_starts[c + 1])
+        if b - a < 2:
+            continue
+        _, pos = fk(style.local_rot[a:b].astype(np.float64), style.root_pos[a:b].astype(np.float64),
+                    sk.offsets, sk.parents)
+        step = np.linalg.norm(np.diff(pos, axis=0), axis=-1).max(axis=1) * style.fps
+        out[a:b] = np.maximum(np.r_[step[0], step], np.r_[step, step[-1]])
+    return out
+
+
+def cached_peak_speeds(style) -> np.ndarray:
+    """``peak_speeds`` kept on disk by the style's fingerprint, as ``cached_accent_beats``."""
+    return _cached(style, "peak-speeds", lambda: {"speed": peak_speeds(style)})["speed"]
+
+
+def _cached(style, tag: str, compute) -> dict:
+    """``compute()`` (a dict of arrays) kept on disk by the style's fingerprint, ``tag`` and this file's code."""
     import hashlib
     import zipfile
     from pathlib import Path
@@ -196,19 +224,19 @@ def cached_accent_beats(style, *, window: float = 0.35) -> AccentBeats:
     from .database import cache_dir
 
     if not style.fingerprint:
-        return accent_beats(style, window=window)
+        return compute()
     code = hashlib.blake2b(Path(__file__).read_bytes(), digest_size=8).hexdigest()
-    path = cache_dir() / "accents" / f"{style.name}-{style.fingerprint}-{window:g}-{code}.npz"
+    path = cache_dir() / "accents" / f"{style.name}-{style.fingerprint}-{tag}-{code}.npz"
     try:
         with np.load(path) as z:
-            return AccentBeats(z["frame"], z["strength"], z["offbeat"], z["slide"])
+            return {k: z[k] for k in z.files}
     except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):
         pass  # not cached yet, or unreadable: compute below
-    out = accent_beats(style, window=window)
+    out = compute()
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_output(path, "wb") as fh:
-            np.savez(fh, frame=out.frame, strength=out.strength, offbeat=out.offbeat, slide=out.slide)
+            np.savez(fh, **out)
     except OSError:
         pass  # a read-only cache only costs the analysis next time
     return out

@@ -24,14 +24,14 @@ from scipy.spatial.transform import Rotation
 
 from ... import rotations as rot
 from ...kinematics import fk
-from ...motion.accents import AccentCosts, cached_accent_beats, fast_beats
+from ...motion.accents import AccentCosts, cached_accent_beats, cached_peak_speeds, fast_beats
 from ...motion.database import Style
 from ...motion.motifs import style_motifs
 from ...motion.roles import find_roles
 from ...motion.words import MotionWords
 from ..footlock import FootLockState, lock_feet
 from ..stitch import Pieces, StitchState, render
-from ..timing import beat_ease, ease_within
+from ..timing import beat_ease, ease_within, speed_room, within_room
 
 
 @dataclass(frozen=True)
@@ -49,6 +49,10 @@ class MixerConfig:
                                    # travel 1.7x, PFC 10x its mocap; docs/choreography.md has the measurements)
     fast_stitch_cost: float = 10.0  # ... and this where a limb whips through the cut (motion.accents.fast_beats):
                                     # no blend carries that speed into another word without a pop
+    speed_weight: float = 2.0      # cost per (log2 of a word's mean speed over its style's)^2: a calm word
+                                   # stitches cheaply, and without it the plan's words came out calmer than
+                                   # the style (pop: p99 joint speed 0.6x its mocap's). 4 slid the feet more
+                                   # (floor foot speed 1.02x the mocap's against 0.96x; tune split)
     root_weight: float = 100.0     # cost per m^2 of root-over-feet offset (and per (m/s * velocity_s)^2 of root
                                    # velocity) a stitch leaves for the blend to glide the body across
     foot_lock: bool = True
@@ -61,6 +65,7 @@ class MixerConfig:
     ease_beats: float = 0.3        # accent timing on each music beat (engines.timing.ease; 0 = off)
     ease_downbeat: float = 0.3     # ... and this much harder on each bar's first beat
     ease_max_rate: float | None = 1.7  # ... never faster between beats than this times the captured speed
+    ease_speed_percentile: float | None = 96.0  # ... nor push a frame past the style's fast ones (timing.within_room)
 
 
 @dataclass(frozen=True)
@@ -237,6 +242,14 @@ def _released(style: Style, frames, fps: float, config: MixerConfig) -> np.ndarr
     return out
 
 
+def word_pace(style: Style, bank: WordBank) -> np.ndarray:
+    """(W,) log2 of each word's mean fastest-joint speed (``motion.accents.peak_speeds``) over its style's."""
+    cum = np.r_[0.0, np.cumsum(cached_peak_speeds(style))]
+    start, end = bank.words.start, bank.words.end
+    mean = (cum[end] - cum[start]) / np.maximum(end - start, 1)
+    return np.log2(np.maximum(mean, 1e-6) / max(cum[-1] / max(len(cum) - 1, 1), 1e-6))
+
+
 @dataclass(frozen=True)
 class Mix:
     local_rot: np.ndarray
@@ -267,6 +280,9 @@ def mix(style: Style, bank: WordBank, motifs: np.ndarray, beat_times_s: np.ndarr
         if config.accent:
             arrive, played = config.accent.beat_costs(accents.strength, accents.offbeat)
             word_cost = arrive[end] + played[start]
+    if config.speed_weight:
+        calm = config.speed_weight * word_pace(style, bank) ** 2
+        word_cost = calm if word_cost is None else word_cost + calm
     chosen = choose_words(bank, np.asarray(motifs), np.diff(times), rng, config, word_cost, word_s, free)
     f0, f1 = bank.words.start[chosen], bank.words.end[chosen]
     jump = np.r_[False, f0[1:] != f1[:-1]]
@@ -275,10 +291,12 @@ def mix(style: Style, bank: WordBank, motifs: np.ndarray, beat_times_s: np.ndarr
         f0, f1 = (accents.frame[np.searchsorted(style.beat_frames, f)] for f in (f0, f1))
     f0, f1 = f0.astype(np.float64), f1.astype(np.float64)
     count = np.arange(len(times), dtype=np.float64) if beat_count is None else np.asarray(beat_count, float)
+    rates = (f1 - f0) / style.fps / np.diff(times)
     ease = ease_within(beat_ease(len(times), bar_position, beats_per_bar, amount=config.ease_beats,
-                                 downbeat=config.ease_downbeat), (f1 - f0) / style.fps / np.diff(times),
-                       config.ease_max_rate, count)
-    pieces = Pieces(times[:-1], times[1:], f0, f1, jump, count[:-1], count[1:], ease[:-1], ease[1:])
+                                 downbeat=config.ease_downbeat), rates, config.ease_max_rate, count)
+    room = speed_room(style, config)
+    pieces = Pieces(times[:-1], times[1:], f0, f1, jump, count[:-1], count[1:], ease[:-1], ease[1:],
+                    None if room is None else within_room(ease, count, f0, f1, rates, room))
     _, frames = render(style, pieces, StitchState(), fps=fps, end_s=end_s, blend_s=config.blend_s,
                        inclusive_end=True)
     local = frames.local_rot

@@ -28,7 +28,7 @@ from ...motion.roles import JointRoles, find_roles
 from ...types import DEFAULT_FPS
 from ..footlock import FootLockState, lock_feet
 from ..stitch import Pieces, Rendered, StitchState, render
-from ..timing import beat_ease, ease_within
+from ..timing import SpeedRoom, beat_ease, ease_within, speed_room, within_room
 from .meta_graph import MetaMotionGraph
 from .search import AccentCosts, Path, StepCosts, search
 from .signature import DEFAULT_WEIGHT, SignatureTarget
@@ -88,6 +88,9 @@ class EngineConfig:
     ease_downbeat: float = 0.45       # ... and this much harder on each bar's first beat
     ease_max_rate: float | None = 1.7  # ... but never faster between beats than this times the captured speed
                                        # (timing.ease_within; None = no limit)
+    ease_speed_percentile: float | None = 96.0  # ... nor push a frame past this percentile of the style's
+                                       # fastest-joint speeds (timing.within_room; None = no limit). Chosen on
+                                       # the tune split: 93 costs more accents, 98 left a song at 1.25x p99
     intensity_weight: float = 8.0     # eq. (8)'s intensity match against the stop, jump and repeat costs
                                       # beyond the paper (1 = the weight they were tuned at)
 
@@ -164,17 +167,21 @@ def standardise(values: np.ndarray, mean: float, std: float) -> np.ndarray:
 
 def pieces_from_path(graph: MetaMotionGraph, path: Path, beat_times_s: np.ndarray,
                      beat_count: np.ndarray | None = None, ease: np.ndarray | None = None,
-                     ease_max_rate: float | None = None) -> Pieces:
+                     ease_max_rate: float | None = None, room: SpeedRoom | None = None) -> Pieces:
     """The path's beat pieces; ``beat_count`` and ``ease`` (K+1,) per beat as in ``Pieces``, the easing
-    kept within ``ease_max_rate`` times the captured speed (``timing.ease_within``)."""
+    kept within ``ease_max_rate`` times the captured speed and ``room`` (``timing.ease_within``)."""
     f0 = graph.render_frame[path.via].astype(np.float64)
     f1 = graph.render_frame[path.nodes[1:]].astype(np.float64)
+    count = np.arange(len(beat_times_s), dtype=np.float64) if beat_count is None else \
+        np.asarray(beat_count, dtype=np.float64)
+    shown = None
     if ease is not None:
-        ease = ease_within(ease, (f1 - f0) / graph.fps / np.diff(beat_times_s), ease_max_rate, beat_count)
-    count = None if beat_count is None else np.asarray(beat_count, dtype=np.float64)
+        rates = (f1 - f0) / graph.fps / np.diff(beat_times_s)
+        ease = ease_within(ease, rates, ease_max_rate, count)
+        shown = None if room is None else within_room(ease, count, f0, f1, rates, room)
     return Pieces(beat_times_s[:-1].astype(float), beat_times_s[1:].astype(float), f0, f1, path.jump.copy(),
-                  None if count is None else count[:-1], None if count is None else count[1:],
-                  None if ease is None else ease[:-1], None if ease is None else ease[1:])
+                  None if beat_count is None else count[:-1], None if beat_count is None else count[1:],
+                  None if ease is None else ease[:-1], None if ease is None else ease[1:], shown)
 
 
 @dataclass(frozen=True)
@@ -250,7 +257,7 @@ class GraphEngine:
         t1 = time.perf_counter()
         pieces = pieces_from_path(self.graph, path, beats, count,
                                   self.config.beat_ease(len(beats), bars, segment.beats_per_bar),
-                                  self.config.ease_max_rate)
+                                  self.config.ease_max_rate, self.speed_room)
         last = segment.end_s is not None
         stitch, frames = render(
             self.style, pieces, state.stitch, fps=self.fps, end_s=segment.end_s if last else float(beats[-1]),
@@ -286,7 +293,7 @@ class GraphEngine:
         t1 = time.perf_counter()
         pieces = pieces_from_path(self.graph, path, np.asarray(beat_times_s, dtype=np.float64), beat_count,
                                   self.config.beat_ease(len(beat_times_s), bar_position, beats_per_bar),
-                                  self.config.ease_max_rate)
+                                  self.config.ease_max_rate, self.speed_room)
         _, frames = render(self.style, pieces, state.stitch, fps=self.fps, end_s=end_s, blend_s=self.config.blend_s,
                            inclusive_end=True, roles=self.roles)
         t2 = time.perf_counter()
@@ -294,6 +301,11 @@ class GraphEngine:
         t3 = time.perf_counter()
         return SegmentFrames.of(frames, local, path, pieces, t1 - t0, t3 - t1, self.signature,
                                 foot_lock_s=t3 - t2)
+
+    @cached_property
+    def speed_room(self) -> SpeedRoom | None:
+        """How fast the style's source moves, for the accent timing (None: not limited by it)."""
+        return speed_room(self.style, self.config)
 
     @cached_property
     def roles(self) -> JointRoles:

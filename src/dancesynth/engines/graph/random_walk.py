@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -30,6 +31,7 @@ from ...motion.database import Style
 from ...motion.roles import find_roles
 from ..footlock import FootLockState, lock_feet
 from ..stitch import StitchState, render
+from ..timing import speed_room
 from .engine import EngineConfig, MusicSegment, SegmentFrames, pieces_from_path
 from .meta_graph import MetaMotionGraph
 from .search import Path
@@ -111,6 +113,11 @@ class RandomWalkEngine:
     config: EngineConfig = EngineConfig()
     fps: float = DEFAULT_FPS
 
+    @cached_property
+    def speed_room(self):
+        """As ``GraphEngine.speed_room``: the walk is rendered with the streaming engine's timing."""
+        return speed_room(self.style, self.config)
+
     def initial_state(self, seed: int | None = None) -> WalkState:
         """Start at a clip's first beat (InitS) drawn by ``seed`` (``None``: seed 0)."""
         rng = np.random.Generator(np.random.PCG64(DEFAULT_SEED if seed is None else seed))
@@ -126,7 +133,8 @@ class RandomWalkEngine:
         path, restarts = random_walk(self.graph, len(beats) - 1, rng, start=state.node, out=self._out)
         t1 = time.perf_counter()
         ease = self.config.beat_ease(len(beats), segment.bar_position, segment.beats_per_bar)
-        pieces = pieces_from_path(self.graph, path, beats, segment.beat_count, ease, self.config.ease_max_rate)
+        pieces = pieces_from_path(self.graph, path, beats, segment.beat_count, ease, self.config.ease_max_rate,
+                                  self.speed_room)
         last = segment.end_s is not None
         stitch, frames = render(self.style, pieces, state.stitch, fps=self.fps,
                                 end_s=segment.end_s if last else float(beats[-1]),
