@@ -98,12 +98,9 @@ BLEND_ACCEL_RAD_S2 = 300.0
 BLEND_ACCEL_M_S2 = np.array([6.0, 30.0, 6.0])
 #: No decay lasts longer (s): past this the two motions are mixed for too long.
 BLEND_MAX_S = 1.0
-#: Fastest a decay may move the end of a limb by itself (m/s): a large offset decays over
-#: longer, so a stitch between two different poses does not whip the limb across (the
-#: choreography's stitches made 60-80 % of its fastest joint motion, 1.2-1.4x the mocap's p99).
-BLEND_SPEED_M_S = 1.0
-#: ... but it lasts no longer than this for it (s): longer, the two words blur into one (up to 1 s,
-#: a re-created dance's motifs were found again in its motion on 0.69 of beats, 0.82 without the limit).
+#: A decay kept slow (``render``'s ``limb_speed``) lasts no longer than this for it (s): longer, the
+#: two words blur into one (up to 1 s, a re-created dance's motifs were found again in its motion on
+#: 0.69 of beats, 0.82 without the limit).
 BLEND_UNHURRIED_S = 0.4
 #: How far a carried velocity difference may swing a joint past its offset before the
 #: decay brings it back (rad): more of a violent difference is dropped instead, so it
@@ -307,7 +304,7 @@ def _jumps_of(style: Style, pieces: Pieces, state: StitchState, yaw: float, star
     return jumps
 
 
-def _blend_rotations(old, new, jumps: list, blend_s: float, fps: float, reach):
+def _blend_rotations(old, new, jumps: list, blend_s: float, fps: float, lever=None):
     """The rotation part of the inertialization at each of ``jumps``: offsets (m, J, 3), their
     velocities and decay times (m, J).
 
@@ -316,7 +313,8 @@ def _blend_rotations(old, new, jumps: list, blend_s: float, fps: float, reach):
     not be blended in), each extrapolated to ``t0`` at its own angular velocity. The offset is
     ``log(old * new^-1)`` per joint; its velocity is the offset's own rate of change, so decaying
     it in rotation-vector space keeps the shown angular velocity continuous however far apart
-    the poses are. ``reach`` (J,): each joint's ``limb_reach``, how far its turn moves the limb's end.
+    the poses are. ``lever`` (J,): each joint's ``limb_reach`` over the fastest its decay may move the
+    limb's end (s per radian; None: as fast as ``blend_s`` asks).
     """
     dt = 1.0 / fps
     both = np.stack([old, new], axis=1)  # (jump, old/new, frame, J, 4)
@@ -336,14 +334,15 @@ def _blend_rotations(old, new, jumps: list, blend_s: float, fps: float, reach):
     size, speed = np.linalg.norm(x0, axis=-1), np.linalg.norm(v0, axis=-1)
     carried = np.minimum(speed, carried_speed(size, BLEND_ACCEL_RAD_S2, BLEND_MAX_SWING_RAD))
     v0 *= (carried / np.maximum(speed, 1e-9))[..., None]
-    return x0, v0, unhurried(decay_time(size, carried, blend_s, BLEND_ACCEL_RAD_S2), size * reach)
+    duration = decay_time(size, carried, blend_s, BLEND_ACCEL_RAD_S2)
+    return x0, v0, duration if lever is None else unhurried(duration, size * lever)
 
 
-def unhurried(duration, swept):
-    """``duration`` long enough that the decay of an offset sweeping ``swept`` (m: its angle times the
-    limb it turns) moves it no faster than ``BLEND_SPEED_M_S``: a Hermite decay peaks
-    at 1.5 times its mean speed."""
-    return np.minimum(np.maximum(duration, 1.5 * np.asarray(swept, float) / BLEND_SPEED_M_S),
+def unhurried(duration, sweep_s):
+    """``duration`` long enough that a decay whose offset would take ``sweep_s`` to cross at the speed
+    allowed (its angle times the limb it turns, over that speed) never moves faster: a Hermite decay
+    peaks at 1.5 times its mean speed. Lengthened no further than ``BLEND_UNHURRIED_S``."""
+    return np.minimum(np.maximum(duration, 1.5 * np.asarray(sweep_s, float)),
                       np.maximum(duration, BLEND_UNHURRIED_S))
 
 
@@ -379,7 +378,8 @@ def _jump_frames(jumps: dict) -> tuple[np.ndarray, np.ndarray]:
             np.array([[j.yaw_old] * 3 + [j.yaw] * 3 for j in order]).ravel())
 
 
-def _place_jumps(style: Style, jumps: dict, local, root, state: StitchState, ankles, blend_s: float, fps: float):
+def _place_jumps(style: Style, jumps: dict, local, root, state: StitchState, ankles, blend_s: float, fps: float,
+                 limb_speed: float | None = None):
     """Where each jump puts the new motion on the floor (offset) and its blend, in order; ``local`` and
     ``root`` are the poses of ``_jump_frames``, placed without an offset.
 
@@ -401,13 +401,13 @@ def _place_jumps(style: Style, jumps: dict, local, root, state: StitchState, ank
     m = len(order)
     local, root = local.reshape(m, 2, 3, *local.shape[1:]), root.reshape(m, 2, 3, 3)  # jump, old/new, frame
     times = np.array([np.r_[j.t0, j.t_old] for j in order])  # of the old motion's three frames
-    rotations, shown = _chain_rotations(local[:, 0], local[:, 1], order, times, state.blend, blend_s, fps,
-                                        limb_reach(style.skeleton))
+    lever = None if limb_speed is None else limb_reach(style.skeleton) / limb_speed
+    rotations, shown = _chain_rotations(local[:, 0], local[:, 1], order, times, state.blend, blend_s, fps, lever)
     feet = _feet_steps(style, ankles, order, shown, local[:, 1, 0])
     return _chain_positions(root, order, times, feet, rotations, state, blend_s, fps)
 
 
-def _chain_rotations(old, new, jumps: list, times, blend: Blend | None, blend_s: float, fps: float, reach, *,
+def _chain_rotations(old, new, jumps: list, times, blend: Blend | None, blend_s: float, fps: float, lever, *,
                      batch: bool = True):
     """The rotation part of each jump's blend (``Blend`` without positions), and the old motion's pose at
     each jump's ``t0`` as shown (m, J, 4).
@@ -426,7 +426,7 @@ def _chain_rotations(old, new, jumps: list, times, blend: Blend | None, blend_s:
     prior[0] = blend is not None
     guess = old.copy()
     guess[prior] = rot.mul(rot.IDENTITY, old[prior])  # exp of zero offsets
-    found = _blend_rotations(guess[:, 1:], new[:, 1:], jumps, blend_s, fps, reach)
+    found = _blend_rotations(guess[:, 1:], new[:, 1:], jumps, blend_s, fps, lever)
     blends = [Blend(j.t0, found[2][i], found[0][i], found[1][i], None, None, None) for i, j in enumerate(jumps)]
     previous = [blend] + blends[:-1]
     shown = old.copy()
@@ -440,7 +440,7 @@ def _chain_rotations(old, new, jumps: list, times, blend: Blend | None, blend_s:
         if i and not same[i]:
             shown[i] = rot.mul(rot.exp(blends[i - 1].rot_at(times[i])), old[i])
         x0, v0, duration = _blend_rotations(shown[i:i + 1, 1:], new[i:i + 1, 1:], jumps[i:i + 1], blend_s, fps,
-                                            reach)
+                                            lever)
         blends[i] = Blend(jumps[i].t0, duration[0], x0[0], v0[0], None, None, None)
         same[i + 1:] = False
     return blends, shown[:, 0]
@@ -519,8 +519,13 @@ def _after(state: StitchState, pieces: Pieces, k: int, end_rate: np.ndarray) -> 
 
 
 def render(style: Style, pieces: Pieces, state: StitchState, *, fps: float, end_s: float,
-           blend_s: float = 0.3, inclusive_end: bool = False, roles: JointRoles | None = None):
+           blend_s: float = 0.3, inclusive_end: bool = False, roles: JointRoles | None = None,
+           limb_speed: float | None = None):
     """Render output frames ``state.next_frame ...`` up to time ``end_s``.
+
+    ``limb_speed``: the fastest (m/s) a jump's decay may move the end of a limb by itself: a large offset
+    then decays over longer (``unhurried``), so a stitch between different poses does not whip the limb
+    across. None: each decay as short as ``blend_s`` and the acceleration limit allow.
 
     ``roles``: the style's ``find_roles``, when the caller keeps them (else found here).
     Returns ``(state, Rendered)``.
@@ -560,7 +565,7 @@ def render(style: Style, pieces: Pieces, state: StitchState, *, fps: float, end_
     local, root, contacts = _place(style, np.r_[jump_frames, src], np.r_[jump_yaws, yaws[k]])
     ankles = (roles or find_roles(style.skeleton)).ankles if jumps else None
     placed = dict(zip(jumps, _place_jumps(style, jumps, local[:len(jump_frames)], root[:len(jump_frames)], st,
-                                          ankles, blend_s, fps)))
+                                          ankles, blend_s, fps, limb_speed)))
     offsets = np.empty((k_pieces, 2))
     blends: list[tuple[float, Blend | None]] = [(-np.inf, st.blend)]
     offset = st.offset  # the placement in force: the last jump's before each piece

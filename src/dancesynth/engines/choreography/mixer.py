@@ -39,6 +39,10 @@ class MixerConfig:
     blend_s: float = 0.25          # inertialization time where words do not continue each other: at 0.2
                                    # the stitches (nearly one per beat) show as stops between beats, at
                                    # 0.4 the words blur (motifs found again in the motion 0.81 -> 0.66)
+    limb_speed: float | None = 1.0  # no stitch's decay moves a limb's end faster than this by itself (m/s;
+                                    # stitch.render): 60-80 % of the fastest joint motion lay at stitches.
+                                    # Not in the graph engines: live, 3 s segments, it blurred the stops
+                                    # (beats lined up 0.71 against 0.84)
     velocity_s: float = 0.1        # a velocity difference counts as the pose change over this time
     tempo_weight: float = 40.0     # cost per (log2 time-warp rate)^2: prefer words of the beat's length
                                    # (40: 97 % of words within 0.8-1.25x on the bench's songs; 20: 88 %; 2: 2 in 3)
@@ -298,7 +302,7 @@ def mix(style: Style, bank: WordBank, motifs: np.ndarray, beat_times_s: np.ndarr
     pieces = Pieces(times[:-1], times[1:], f0, f1, jump, count[:-1], count[1:], ease[:-1], ease[1:],
                     None if room is None else within_room(ease, count, f0, f1, rates, room))
     _, frames = render(style, pieces, StitchState(), fps=fps, end_s=end_s, blend_s=config.blend_s,
-                       inclusive_end=True)
+                       inclusive_end=True, limb_speed=config.limb_speed)
     local = frames.local_rot
     if config.foot_lock:
         held = replace(frames, contacts=frames.contacts & ~_released(style, frames, fps, config))
