@@ -9,7 +9,7 @@ extremes of that ratio, accent precision and visible precision x chance, and the
 against the mocap's (a guard of its own, at most 1.1) and the worst transition jump against the
 mocap's p99 frame jump. A setting is the easing's
 per-frame speed limit (``ease_speed_percentile``, None: none), the decays' limb speed and how long they
-may last for it (the mixer's ``limb_speed``, ``stitch.BLEND_UNHURRIED_S``; the graph engines keep plain
+may last for it (the mixer's ``limb_speed``, ``decay.BLEND_UNHURRIED_S``; the graph engines keep plain
 decays) and the mixer's word pace cost
 (``MixerConfig.speed_weight``). The product's defaults are the setting ``chosen``. Prints a table and
 writes benchmarks/results/speed_guard_select.json.
@@ -58,13 +58,13 @@ def defaults(cls, **values):
 
 @contextlib.contextmanager
 def setting(pct, limb_speed, longest, pace):
-    from dancesynth.engines import stitch
+    from dancesynth.engines import decay
     from dancesynth.engines.choreography import engine as choreography
     from dancesynth.engines.choreography.mixer import MixerConfig
     from dancesynth.engines.graph.engine import EngineConfig
 
-    saved = stitch.BLEND_UNHURRIED_S, choreography.choreography_dance.__kwdefaults__
-    stitch.BLEND_UNHURRIED_S = longest
+    saved = decay.BLEND_UNHURRIED_S, choreography.choreography_dance.__kwdefaults__
+    decay.BLEND_UNHURRIED_S = longest
     mixer = dataclasses.replace(MixerConfig(), ease_speed_percentile=pct, speed_weight=pace,
                                 limb_speed=None if not np.isfinite(limb_speed) else limb_speed)
     choreography.choreography_dance.__kwdefaults__ = {**saved[1], "mixer": mixer}
@@ -72,7 +72,7 @@ def setting(pct, limb_speed, longest, pace):
         with defaults(EngineConfig, ease_speed_percentile=pct):
             yield
     finally:
-        stitch.BLEND_UNHURRIED_S, choreography.choreography_dance.__kwdefaults__ = saved
+        decay.BLEND_UNHURRIED_S, choreography.choreography_dance.__kwdefaults__ = saved
 
 
 def main() -> None:

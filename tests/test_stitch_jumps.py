@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from dancesynth.engines import stitch
-from dancesynth.engines.stitch import Blend, Pieces, StitchState, render
+from dancesynth.engines.decay import Blend, blends_at
+from dancesynth.engines.stitch import Pieces, StitchState, render
 
 
 def _same(a, b) -> bool:
@@ -58,12 +59,12 @@ def test_several_blends_at_once_are_each_blend_at_its_times():
                     rng.uniform(0.3, 1.0, 3), rng.normal(size=3), rng.normal(size=3)) for t0 in (0.0, 0.4, 1.1)]
     counts = [4, 1, 6]
     t = rng.uniform(0, 2, size=sum(counts))
-    rx, px = stitch._blends_at(blends, counts, t)
+    rx, px = blends_at(blends, counts, t)
     which = np.repeat(np.arange(3), counts)
     for i in range(len(t)):
         one_rx, one_px = blends[which[i]].at(t[i:i + 1])
         assert _same(rx[i], one_rx[0]) and _same(px[i], one_px[0])
-    assert _same(stitch._blends_at(blends, counts, t, positions=False), rx)
+    assert _same(blends_at(blends, counts, t, positions=False), rx)
 
 
 def test_feet_summed_from_the_root_are_forward_kinematics_to_the_bit(bundled_db):

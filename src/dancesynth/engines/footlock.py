@@ -41,7 +41,8 @@ from ..motion.cleanup import spread_steps
 from ..motion.features import foot_points
 from ..motion.roles import JointRoles
 from ..types import MotionClip, Skeleton
-from .stitch import Rendered, decay_basis
+from .decay import decay_basis
+from .stitch import Rendered
 
 
 def _per_foot(shape=()):

@@ -151,6 +151,8 @@ def _fill(wanted: np.ndarray, cap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ``kappa`` = 4 can, the column is even (1). Also returns whether it fit."""
     between = wanted >= 1.0
     rate, fits = _scaled(wanted, cap, between)
+    if fits.all():   # as a rule: the whole-piece scaling is for pieces fast nearly throughout
+        return rate, fits
     everywhere, fits_everywhere = _scaled(wanted, cap, np.ones_like(between))
     rate = np.where(fits, rate, np.where(fits_everywhere, everywhere, 1.0))
     return rate, fits | fits_everywhere

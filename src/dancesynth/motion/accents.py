@@ -74,16 +74,23 @@ class AccentCosts:
         return self.unaccented * np.maximum(1.0 - strength, 0.0), played
 
 
+def _clip_poses(style):
+    """``(start, end, global rotations, global positions)`` of each clip of ``style``, one at a time
+    (a large style need not sit in memory as global poses)."""
+    sk = style.skeleton
+    for c in range(style.n_clips):
+        a, b = int(style.clip_starts[c]), int(style.clip_starts[c + 1])
+        g_rot, g_pos = fk(style.local_rot[a:b].astype(np.float64), style.root_pos[a:b].astype(np.float64),
+                          sk.offsets, sk.parents)
+        yield a, b, g_rot, g_pos
+
+
 def visible_accents(style) -> tuple[np.ndarray, np.ndarray]:
     """Flat frames of every speed minimum of ``style`` and its prominence / the clip's mean speed."""
     from scipy import signal  # costs ~0.8 s to import; only analysis needs it
 
-    sk = style.skeleton
     frames, strength = [], []
-    for c in range(style.n_clips):
-        a, b = int(style.clip_starts[c]), int(style.clip_starts[c + 1])
-        _, pos = fk(style.local_rot[a:b].astype(np.float64), style.root_pos[a:b].astype(np.float64),
-                    sk.offsets, sk.parents)
+    for a, _, _, pos in _clip_poses(style):
         found, smooth = kinematic_beats(summed_speed(pos, style.fps), style.fps)
         if found.size:
             frames.append(found + a)
@@ -166,12 +173,10 @@ def foot_slide(style) -> np.ndarray:
     roles = find_roles(sk)
     low_speed = np.zeros(style.n_frames)
     both = np.zeros(style.n_frames)
-    for c in range(style.n_clips):
-        a, b = int(style.clip_starts[c]), int(style.clip_starts[c + 1])
+    for a, b, g_rot, g_pos in _clip_poses(style):
         if b - a < 3:
             continue
         local, root = style.local_rot[a:b].astype(np.float64), style.root_pos[a:b].astype(np.float64)
-        g_rot, g_pos = fk(local, root, sk.offsets, sk.parents)
         feet = foot_points(MotionClip(sk, fps, root, local), roles, g_rot, g_pos)
         speed = np.linalg.norm(np.gradient(feet[..., [0, 2]], axis=0), axis=-1).min(axis=2) * fps  # (F, 2)
         height = feet[..., 1].min(axis=2)
@@ -196,14 +201,10 @@ def peak_speeds(style) -> np.ndarray:
     """(F,) per frame of ``style``: its fastest joint's speed (m/s) as captured, the faster of the
     steps into and out of the frame. What the accent timing may not push past the style's own
     fast frames (``timing.SpeedRoom``)."""
-    sk = style.skeleton
     out = np.zeros(style.n_frames)
-    for c in range(style.n_clips):
-        a, b = int(style.clip_starts[c]), int(style.clip_starts[c + 1])
+    for a, b, _, pos in _clip_poses(style):
         if b - a < 2:
             continue
-        _, pos = fk(style.local_rot[a:b].astype(np.float64), style.root_pos[a:b].astype(np.float64),
-                    sk.offsets, sk.parents)
         step = np.linalg.norm(np.diff(pos, axis=0), axis=-1).max(axis=1) * style.fps
         out[a:b] = np.maximum(np.r_[step[0], step], np.r_[step, step[-1]])
     return out
@@ -227,19 +228,28 @@ def _cached(style, tag: str, compute) -> dict:
         return compute()
     code = hashlib.blake2b(Path(__file__).read_bytes(), digest_size=8).hexdigest()
     path = cache_dir() / "accents" / f"{style.name}-{style.fingerprint}-{tag}-{code}.npz"
+    if path in _READ:   # a dance asks more than once (the mixer: its words, their pace, the timing)
+        return _READ[path]
     try:
         with np.load(path) as z:
-            return {k: z[k] for k in z.files}
+            out = {k: z[k] for k in z.files}
     except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):
-        pass  # not cached yet, or unreadable: compute below
-    out = compute()
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_output(path, "wb") as fh:
-            np.savez(fh, **out)
-    except OSError:
-        pass  # a read-only cache only costs the analysis next time
+        out = None  # not cached yet, or unreadable: compute below
+    if out is None:
+        out = compute()
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with atomic_output(path, "wb") as fh:
+                np.savez(fh, **out)
+        except OSError:
+            pass  # a read-only cache only costs the analysis next time
+    for a in out.values():
+        a.flags.writeable = False   # shared by every later caller: none may change it
+    _READ[path] = out
     return out
+
+
+_READ: dict = {}  # what _cached read or computed in this process, by file: a few arrays per style
 
 
 def limb_turns(style) -> np.ndarray:
