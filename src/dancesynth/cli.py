@@ -232,15 +232,19 @@ def motifs(dance_path, genre, json_path, plot_path, database):
 @click.argument("song", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Write the beats as JSON: {\"beats\": [seconds...], \"tempo\": bpm, \"downbeats\": [seconds...], "
-                   "\"beats_per_bar\": 3 or 4, \"beat_in_bar\": [0 = downbeat...], \"bar\": [1...], ...}.")
+                   "\"beats_per_bar\": 3 or 4, \"beat_in_bar\": [0 = downbeat...], \"bar\": [1...], "
+                   "\"sections\": [{start_s, end_s, label, name, first_bar, bars}...], \"phrases\": {\"4\": [...], "
+                   "\"8\": [...]}, ...}.")
 @click.option("--tracker", default=None, help="Beat tracker (default: the product's, 'varying').")
 def beats(song, json_path, tracker):
     """Print the beats and bars dancesynth hears in SONG (the beats `dance` lands motion beats on).
 
     Bars are numbered from 1 on the first beat; a new bar starts on every downbeat
-    (so the beats of a pickup before the first downbeat are bar 1).
+    (so the beats of a pickup before the first downbeat are bar 1). Sections (verse,
+    chorus, ...: the same letter plays the same music) start on downbeats.
     """
     from .music import DEFAULT_TRACKER, TRACKERS, analyze_music
+    from .music.structure import analyze_structure
 
     tracker = tracker or DEFAULT_TRACKER
     if tracker not in TRACKERS:
@@ -258,6 +262,9 @@ def beats(song, json_path, tracker):
             "downbeats": [round(float(b), 4) for b in music.downbeat_times_s], "beats_per_bar": music.beats_per_bar,
             "beat_in_bar": music.beat_in_bar.tolist(), "bar": bar,
             "metre_confidence": round(float(music.meta["metre_confidence"]), 3)}
+    structure = analyze_structure(song, music)
+    first_bar = bar[downbeat.index(True)] if True in downbeat else 1
+    data.update(structure.report(first_bar))
     if json_path is not None:
         write_json(json_path, data)
     note = " (no clear beat: a steady default tempo)" if music.default_tempo else ""
@@ -266,6 +273,8 @@ def beats(song, json_path, tracker):
     click.echo(f"metre {music.beats_per_bar}/4 (confidence {music.meta['metre_confidence']:.2f}), "
                f"{bar[-1] if bar else 0} bars; '|' marks a downbeat")
     click.echo(" ".join(("| " if d else "") + f"{b:.3f}" for b, d in zip(music.beat_times_s, downbeat)))
+    click.echo("sections: " + ", ".join(f"{x['label']} {x['name']} {x['start_s']:.1f} s ({x['bars']} bars)"
+                                        for x in data["sections"]))
 
 
 @cli.command("eval")

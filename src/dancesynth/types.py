@@ -151,6 +151,48 @@ class MotionClip:
             None if self.contacts is None else self.contacts[sl], dict(self.meta))
 
 
+@dataclass(frozen=True)
+class Section:
+    """A part of a song's form (``music.structure``): from ``start_s`` (a downbeat; 0 for the first) to
+    ``end_s``, bars ``first_bar`` .. ``first_bar + n_bars``; sections with the same ``label`` ("A", "B",
+    ...) play the same music; ``name`` is verse, chorus, bridge, intro or outro."""
+
+    start_s: float
+    end_s: float
+    label: str
+    name: str
+    first_bar: int
+    n_bars: int
+
+
+@dataclass(frozen=True)
+class Phrase:
+    """``n_bars`` bars from ``start_s`` (bar ``first_bar``), a group of ``size`` (4 or 8) counted from its
+    section's first bar (shorter at a section's end)."""
+
+    start_s: float
+    first_bar: int
+    n_bars: int
+    size: int
+
+
+@dataclass(frozen=True)
+class SongStructure:
+    """A song's sections in order and its phrases of each size."""
+
+    sections: tuple[Section, ...]
+    phrases: tuple[Phrase, ...] = ()
+
+    def report(self, first_bar: int = 1) -> dict:
+        """JSON-ready: what ``beats --json`` writes, bars numbered from ``first_bar`` (the first downbeat's)."""
+        return {"sections": [{"start_s": round(s.start_s, 3), "end_s": round(s.end_s, 3), "label": s.label,
+                              "name": s.name, "first_bar": s.first_bar + first_bar, "bars": s.n_bars}
+                             for s in self.sections],
+                "phrases": {str(size): [{"start_s": round(p.start_s, 3), "first_bar": p.first_bar + first_bar,
+                                         "bars": p.n_bars} for p in self.phrases if p.size == size]
+                            for size in sorted({p.size for p in self.phrases})}}
+
+
 @dataclass(eq=False)
 class MusicFeatures:
     """What the synthesis engines know about a piece of music.
@@ -176,6 +218,7 @@ class MusicFeatures:
     meta: dict = field(default_factory=dict)
     beats_per_bar: int | None = None
     beat_in_bar: np.ndarray | None = None
+    structure: SongStructure | None = None   # sections and phrases (``music.structure``); None: not analysed
 
     def __post_init__(self):
         self.beat_times_s = np.asarray(self.beat_times_s, dtype=np.float64)

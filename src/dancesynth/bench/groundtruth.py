@@ -17,6 +17,12 @@ follow I-V-vi-IV with a new chord on the bar line every ``bars_per_chord`` bars,
 seeded melody of quarter, eighth and half notes on a pentatonic scale, and, with
 drums, kick and snare on the beats and hi-hat eighths. Velocities accent the
 downbeat a little, as players do; nothing else marks the beat or the bar.
+
+A song with a ``form`` (``structure_specs``) is made of sections, each a label and a
+length in bars: every label has its own progression, melody, lead instrument, drum
+part and loudness, and a section heard again replays its melody and chords with one
+instrument more (the lead doubled an octave up), as arrangements do. Its truth adds
+the sections' times and labels.
 """
 
 from __future__ import annotations
@@ -50,6 +56,47 @@ _MELODY_PROGRAMS = (73, 56, 65, 11)     # flute, trumpet, alto sax, vibraphone
 _PENTATONIC = (0, 2, 4, 7, 9)
 _PROGRESSION = (0, 7, 9, 5)             # I - V - vi - IV, as semitones above the key
 _MINOR_DEGREE = {9}
+_DOUBLE_PROGRAM = 40                    # violin: the instrument a repeated section adds
+# A form's sections by label: progression, drum part, loudness (a chorus loud with full drums, a verse lighter,
+# a bridge without drums, an intro or outro quiet); another label takes one of these by its first appearance.
+_SECTION_SOUND = {"V": ((0, 7, 9, 5), "light", -8), "C": ((5, 0, 7, 9), "full", 8),
+                  "B": ((9, 5, 7, 7), "", -16), "I": ((2, 7, 0, 0), "light", -18), "O": ((2, 7, 0, 0), "light", -18)}
+
+
+@dataclass(frozen=True)
+class _Texture:
+    """How one bar is played: its section's progression (from ``first_bar``), drums ("full", "light":
+    kick and hats, "": none), a velocity shift, its lead, whether the lead is doubled, and whether
+    the bar starts its section (the melody restarts from ``seed``)."""
+
+    progression: tuple[int, ...] = _PROGRESSION
+    first_bar: int = 0
+    drums: str = "full"
+    loud: int = 0
+    program: int = 0
+    double: bool = False
+    starts: bool = False
+    seed: int = 0
+
+
+_PLAIN = _Texture()
+
+
+def _textures(spec: "SongSpec") -> list[_Texture]:
+    """Per bar of a song with a ``form``: how its section plays it (empty without a form)."""
+    order: list[str] = []
+    seen: dict[str, int] = {}
+    out = []
+    for label, first_bar, bars in spec.sections:
+        if label not in order:
+            order.append(label)
+        i = order.index(label)
+        progression, drums, loud = _SECTION_SOUND.get(label, list(_SECTION_SOUND.values())[i % len(_SECTION_SOUND)])
+        base = _Texture(progression, first_bar, drums, loud, _MELODY_PROGRAMS[(spec.seed + i) % len(_MELODY_PROGRAMS)],
+                        seen.get(label, 0) > 0, seed=spec.seed * 100 + i)
+        seen[label] = seen.get(label, 0) + 1
+        out += [replace(base, starts=(k == 0)) for k in range(bars)]
+    return out
 
 
 @dataclass(frozen=True)
@@ -74,6 +121,16 @@ class SongSpec:
     seed: int = 0
     pickup_beats: int = 0
     bars_per_chord: int = 1
+    form: tuple[tuple[str, int], ...] = ()   # sections (label, bars), in order; () = one texture throughout
+
+    @property
+    def sections(self) -> list[tuple[str, int, int]]:
+        """``(label, first bar, bars)`` of each section of ``form`` (bars counted after the pickup)."""
+        out, bar = [], 0
+        for label, bars in self.form:
+            out.append((label, bar, bars))
+            bar += bars
+        return out
 
     @property
     def tags(self) -> dict:
@@ -93,6 +150,7 @@ class GroundTruthSong:
     tags: dict = field(default_factory=dict)
     beat_in_bar: np.ndarray | None = None
     beats_per_bar: int | None = None
+    sections: tuple[tuple[float, float, str], ...] = ()   # (start s, end s, label) of a song with a form
 
     @property
     def downbeats_s(self) -> np.ndarray | None:
@@ -169,6 +227,10 @@ def beat_tempi(spec: SongSpec) -> np.ndarray:
     a = spec.tempo[0]
     b = spec.tempo[-1]
     pickup = spec.pickup_beats
+    if spec.form:
+        if spec.kind != "constant" or any(not (isinstance(n, int) and n >= 1) for _, n in spec.form):
+            raise InputError(f"{spec.name}: a form needs a constant tempo and sections of whole bars")
+        return np.full(pickup + sum(n for _, n in spec.form) * spec.beats_per_bar, float(a))
     # Enough beats at the faster tempo, trimmed to whole bars below.
     n = int(np.ceil(spec.duration_s * max(a, b) / 60.0)) + spec.beats_per_bar + pickup
     if spec.kind == "constant":
@@ -227,7 +289,8 @@ def write_midi(spec: SongSpec, path: Path) -> np.ndarray:
     bpb = spec.beats_per_bar
     key = 45 + int(rng.integers(0, 7))  # A2..D#3 bass roots
 
-    events: dict[str, list[tuple[float, mido.Message]]] = {"bass": [], "piano": [], "melody": [], "drums": []}
+    events: dict[str, list[tuple[float, mido.Message]]] = {"bass": [], "piano": [], "melody": [], "double": [],
+                                                           "drums": []}
 
     def note(part: str, channel: int, pitch: int, start_beat: float, length_beats: float, velocity: int):
         if start_beat < 0:  # the part of the pickup's bar before the song starts
@@ -240,48 +303,59 @@ def write_midi(spec: SongSpec, path: Path) -> np.ndarray:
     melody_pitch = 3  # index into the melody's scale
     scale = [key + 24 + 12 * octave + step for octave in range(3) for step in _PENTATONIC]
     pickup = spec.pickup_beats
+    textures = _textures(spec)
     # Bar -1 is the pickup: only its last ``pickup`` beats sound.
     for bar in range(-1 if pickup else 0, (n_beats - pickup) // bpb):
         first = bar * bpb + pickup
-        degree = _PROGRESSION[(bar // spec.bars_per_chord) % len(_PROGRESSION)]
+        tex = textures[bar] if bar >= 0 and textures else _PLAIN
+        if tex.starts:  # a section's own melody from its first note (a repeat replays it) and its lead
+            rng, melody_pitch = np.random.default_rng(tex.seed), 3
+            events["melody"].append((first, mido.Message("program_change", channel=3, program=tex.program)))
+        loud = tex.loud
+        degree = tex.progression[((bar - tex.first_bar) // spec.bars_per_chord) % len(tex.progression)]
         root = key + degree
         third = 3 if degree in _MINOR_DEGREE else 4
         chord = [root + 12, root + 12 + third, root + 19]
         for beat in range(bpb):
             accent = 12 if beat == 0 else 0
-            note("bass", 1, root if beat % 2 == 0 else root + 7, first + beat, 0.9, 88 + accent)
+            note("bass", 1, root if beat % 2 == 0 else root + 7, first + beat, 0.9, 88 + accent + loud)
         if bpb == 3:  # oom-pah-pah: the bass is the oom
             for beat in (1, 2):
                 for p in chord:
-                    note("piano", 2, p, first + beat, 0.5, 62)
+                    note("piano", 2, p, first + beat, 0.5, 62 + loud)
         else:
             for beat in (0, 2):
                 for p in chord:
-                    note("piano", 2, p, first + beat, 1.8, 70 if beat == 0 else 62)
+                    note("piano", 2, p, first + beat, 1.8, (70 if beat == 0 else 62) + loud)
         # Melody: a seeded rhythm of half, quarter and eighth notes filling the bar.
         position = 0.0
         while position < bpb - 1e-9:
             choices = [d for d in (2.0, 1.0, 1.0, 0.5, 0.5) if position + d <= bpb + 1e-9]
             length = float(rng.choice(choices))
+            def lead(start, length_beats, velocity):
+                note("melody", 3, scale[melody_pitch], start, length_beats, velocity + loud)
+                if tex.double:
+                    note("double", 4, scale[melody_pitch] + 12, start, length_beats, velocity - 10 + loud)
+
             if length == 0.5:
                 # Eighths come in pairs; the second is swung.
                 melody_pitch = int(np.clip(melody_pitch + rng.integers(-2, 3), 0, len(scale) - 1))
-                note("melody", 3, scale[melody_pitch], first + position, offbeat, 80)
+                lead(first + position, offbeat, 80)
                 melody_pitch = int(np.clip(melody_pitch + rng.integers(-2, 3), 0, len(scale) - 1))
-                note("melody", 3, scale[melody_pitch], first + position + offbeat, 1.0 - offbeat, 72)
+                lead(first + position + offbeat, 1.0 - offbeat, 72)
                 length = 1.0
             else:
                 melody_pitch = int(np.clip(melody_pitch + rng.integers(-2, 3), 0, len(scale) - 1))
-                note("melody", 3, scale[melody_pitch], first + position, length, 84)
+                lead(first + position, length, 84)
             position += length
-        if spec.drums:
+        if spec.drums and tex.drums:
             for beat in range(bpb):
                 if beat == 0 or (bpb == 4 and beat == 2):
-                    note("drums", 9, _KICK, first + beat, 0.25, 100)
-                else:
-                    note("drums", 9, _SNARE, first + beat, 0.25, 90 if bpb == 4 else 70)
-                note("drums", 9, _HAT, first + beat, 0.25, 70)
-                note("drums", 9, _HAT, first + beat + offbeat, 0.25, 50)
+                    note("drums", 9, _KICK, first + beat, 0.25, 100 + loud)
+                elif tex.drums == "full":
+                    note("drums", 9, _SNARE, first + beat, 0.25, (90 if bpb == 4 else 70) + loud)
+                note("drums", 9, _HAT, first + beat, 0.25, 70 + loud)
+                note("drums", 9, _HAT, first + beat + offbeat, 0.25, 50 + loud)
 
     mid = mido.MidiFile(type=1, ticks_per_beat=TICKS_PER_BEAT)
     conductor = mido.MidiTrack()
@@ -297,7 +371,7 @@ def write_midi(spec: SongSpec, path: Path) -> np.ndarray:
         last_tick = tick
     mid.tracks.append(conductor)
     programs = {"bass": (1, _BASS_PROGRAM), "piano": (2, _PIANO_PROGRAM),
-                "melody": (3, _MELODY_PROGRAMS[spec.seed % len(_MELODY_PROGRAMS)])}
+                "melody": (3, _MELODY_PROGRAMS[spec.seed % len(_MELODY_PROGRAMS)]), "double": (4, _DOUBLE_PROGRAM)}
     for part, messages in events.items():
         if not messages:
             continue
@@ -347,6 +421,7 @@ def render_song(spec: SongSpec, out_dir: Path, *, soundfont: Path | None = None)
     wav_path = out_dir / f"{spec.name}.wav"
     beats_path = out_dir / f"{spec.name}.beats.json"
     beats, positions = beat_times(spec), beat_positions(spec)
+    sections = section_times(spec)
     if not midi_path.is_file():
         write_midi(spec, midi_path)
     if not wav_path.is_file():
@@ -354,9 +429,51 @@ def render_song(spec: SongSpec, out_dir: Path, *, soundfont: Path | None = None)
     if not beats_path.is_file():
         with atomic_output(beats_path) as fh:
             fh.write(json.dumps({"beats": beats.tolist(), "beat_in_bar": positions.tolist(),
-                                 "beats_per_bar": spec.beats_per_bar, "spec": asdict(spec)}, indent=1))
-    return GroundTruthSong(spec.name, wav_path, midi_path, beats, spec.duration_s, spec.tags,
-                           beat_in_bar=positions, beats_per_bar=spec.beats_per_bar)
+                                 "beats_per_bar": spec.beats_per_bar, "spec": asdict(spec),
+                                 **({"sections": sections} if sections else {})}, indent=1))
+    duration = sections[-1][1] if sections else spec.duration_s
+    return GroundTruthSong(spec.name, wav_path, midi_path, beats, duration, spec.tags,
+                           beat_in_bar=positions, beats_per_bar=spec.beats_per_bar, sections=tuple(sections))
+
+
+def section_times(spec: SongSpec) -> list[tuple[float, float, str]]:
+    """``(start s, end s, label)`` of each section of a song with a ``form`` (none without): each starts
+    on its first downbeat, the first at 0 s (with the pickup), the last ends with its last bar."""
+    if not spec.form:
+        return []
+    us = microseconds_per_beat(beat_tempi(spec))
+    edges = np.concatenate(([0], np.cumsum(us))) / 1e6
+    starts = [0.0 if k == 0 else float(edges[spec.pickup_beats + first * spec.beats_per_bar])
+              for k, (_, first, _) in enumerate(spec.sections)]
+    ends = starts[1:] + [float(edges[-1])]
+    return [(a, b, label) for a, b, (label, _, _) in zip(starts, ends, spec.sections)]
+
+
+#: Songs of known form for the music-structure benchmark, per split (tune: where the analysis's constants
+#: were chosen; test: what the bench reports): (tempo, beats per bar, form). Sections are verse (V),
+#: chorus (C), bridge (B), intro (I) and outro (O); 8 bars each but intros and outros of 4.
+_FORMS = {
+    "pop": (("I", 4), ("V", 8), ("C", 8), ("V", 8), ("C", 8), ("B", 8), ("C", 8)),
+    "aaba": (("V", 8), ("V", 8), ("B", 8), ("V", 8)),
+    "double-chorus": (("V", 8), ("C", 8), ("V", 8), ("C", 8), ("C", 8), ("O", 4)),
+    "rondo": (("V", 8), ("C", 8), ("B", 8), ("C", 8), ("V", 8), ("C", 8)),
+}
+STRUCTURE_SPLITS = {
+    "tune": ((96, 4, "pop"), (124, 4, "aaba"), (140, 4, "double-chorus"), (108, 3, "rondo"),
+             (150, 4, "pop"), (88, 4, "rondo")),
+    "test": ((100, 4, "pop"), (132, 4, "aaba"), (118, 4, "double-chorus"), (112, 3, "rondo"),
+             (156, 4, "rondo"), (92, 3, "pop")),
+}
+
+
+def structure_specs(split: str = "test") -> list[SongSpec]:
+    """The songs of known form of a split (``STRUCTURE_SPLITS``), with drums, half of them with a pickup."""
+    if split not in STRUCTURE_SPLITS:
+        raise InputError(f"generated-song split {split!r}: use one of {', '.join(STRUCTURE_SPLITS)}")
+    seed = SPLITS[split]["seed"] + 500
+    return [SongSpec(f"form-{form}{bpm}_{bpb}-4", (float(bpm),), beats_per_bar=bpb, seed=seed + i,
+                     pickup_beats=(i % 2) * (bpb - 1), form=_FORMS[form])
+            for i, (bpm, bpb, form) in enumerate(STRUCTURE_SPLITS[split])]
 
 
 def ground_truth_set(cache_dir: Path, *, quick: bool = False, specs: list[SongSpec] | None = None,
@@ -368,7 +485,9 @@ def ground_truth_set(cache_dir: Path, *, quick: bool = False, specs: list[SongSp
     """
     specs = song_specs(quick=quick, split=split) if specs is None else specs
     soundfont = find_soundfont()
-    key = hashlib.sha256(json.dumps([GENERATOR_VERSION, str(soundfont), [asdict(s) for s in specs]],
+    # A song without a form keys as it did before forms existed (its render is the same).
+    key = hashlib.sha256(json.dumps([GENERATOR_VERSION, str(soundfont),
+                                     [{k: v for k, v in asdict(s).items() if k != "form" or v} for s in specs]],
                                     sort_keys=True).encode()).hexdigest()[:12]
     out_dir = Path(cache_dir) / f"groundtruth-{key}"
     songs = []
