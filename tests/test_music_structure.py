@@ -13,7 +13,7 @@ from click.testing import CliRunner
 from dancesynth.bench.groundtruth import render_song, section_times, structure_specs, write_midi
 from dancesynth.cli import cli
 from dancesynth.music import analyze_music
-from dancesynth.music.structure import analyze_structure, boundaries, novelty, song_structure
+from dancesynth.music.structure import boundaries, novelty, song_structure
 
 needs_fluidsynth = pytest.mark.skipif(shutil.which("fluidsynth") is None, reason="fluidsynth not installed")
 
@@ -66,8 +66,7 @@ def test_a_song_too_short_for_sections_is_one():
 def test_sections_of_a_rendered_song_of_known_form(tmp_path):
     spec = _spec("form-rondo108_3-4")   # V C B C V C, 8 bars each, in 3/4
     song = render_song(spec, tmp_path)
-    music = analyze_music(path=song.audio_path)
-    st = analyze_structure(song.audio_path, music)
+    st = analyze_music(path=song.audio_path, structure=True).structure
     starts = np.array([s.start_s for s in st.sections])
     truth = np.array([s[0] for s in song.sections])
     assert len(starts) == len(truth) and np.all(np.abs(starts - truth) < 0.5)

@@ -244,12 +244,11 @@ def beats(song, json_path, tracker):
     chorus, ...: the same letter plays the same music) start on downbeats.
     """
     from .music import DEFAULT_TRACKER, TRACKERS, analyze_music
-    from .music.structure import analyze_structure
 
     tracker = tracker or DEFAULT_TRACKER
     if tracker not in TRACKERS:
         raise InputError(f"unknown tracker {tracker!r}; choose one of {', '.join(sorted(TRACKERS))}")
-    music = analyze_music(path=song, tracker=tracker)
+    music = analyze_music(path=song, tracker=tracker, structure=True)
     downbeat = [int(p) == 0 for p in music.beat_in_bar]
     bar, number = [], 0 if downbeat[:1] == [True] else 1
     for d in downbeat:
@@ -262,9 +261,8 @@ def beats(song, json_path, tracker):
             "downbeats": [round(float(b), 4) for b in music.downbeat_times_s], "beats_per_bar": music.beats_per_bar,
             "beat_in_bar": music.beat_in_bar.tolist(), "bar": bar,
             "metre_confidence": round(float(music.meta["metre_confidence"]), 3)}
-    structure = analyze_structure(song, music)
     first_bar = bar[downbeat.index(True)] if True in downbeat else 1
-    data.update(structure.report(first_bar))
+    data.update(music.structure.report(first_bar))
     if json_path is not None:
         write_json(json_path, data)
     note = " (no clear beat: a steady default tempo)" if music.default_tempo else ""

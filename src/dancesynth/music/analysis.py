@@ -31,7 +31,7 @@ def analyze_music(*, path=None, y: np.ndarray | None = None, sr: int | None = No
                   fallback_bpm: float = FALLBACK_BPM, tracker: str = DEFAULT_TRACKER,
                   min_confidence: float = MIN_CONFIDENCE, silence_db: float = SILENCE_PEAK_DB,
                   max_duration_s: float | None = DEFAULT_MAX_DURATION_S,
-                  min_duration_s: float = DEFAULT_MIN_DURATION_S) -> MusicFeatures:
+                  min_duration_s: float = DEFAULT_MIN_DURATION_S, structure: bool = False) -> MusicFeatures:
     """Analyse a song for dancing.
 
     Give either ``path`` (any format ``dancesynth.io.audio.load_audio`` reads) or the
@@ -50,7 +50,8 @@ def analyze_music(*, path=None, y: np.ndarray | None = None, sr: int | None = No
     each beat interval. ``beats_per_bar`` (3 or 4) and ``beat_in_bar`` come from
     ``dancesynth.music.metre.track_metre`` (``meta["metre_confidence"]`` in [0, 1]
     says how sure it is); the fallback grid counts 4/4 from its first beat with
-    confidence 0.
+    confidence 0. With ``structure``, also the song's sections and phrases
+    (``MusicFeatures.structure``, ``dancesynth.music.structure``) from the same samples.
 
     Raises ``InputError`` for unusable input: a bad file (see ``load_audio``),
     audio shorter than ``min_duration_s`` or longer than ``max_duration_s``, or
@@ -91,6 +92,11 @@ def analyze_music(*, path=None, y: np.ndarray | None = None, sr: int | None = No
     beats_per_bar, beat_in_bar, metre_confidence = track_metre(samples, rate, beat_times_s=beat_times_s,
                                                                end_s=duration_s, steady_grid=not clear)
 
+    form = None
+    if structure:
+        from .structure import song_structure
+
+        form = song_structure(samples, rate, beat_times_s, beat_in_bar, beats_per_bar, duration_s)
     return MusicFeatures(
         duration_s=duration_s,
         beat_times_s=beat_times_s,
@@ -101,6 +107,7 @@ def analyze_music(*, path=None, y: np.ndarray | None = None, sr: int | None = No
         source=name,
         beats_per_bar=beats_per_bar,
         beat_in_bar=beat_in_bar,
+        structure=form,
         meta={
             "tracker": tracker,
             "analysis_sr": rate,

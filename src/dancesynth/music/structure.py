@@ -16,7 +16,8 @@ Everything is counted in bars, from the beats and downbeats the analysis already
    repeated ones verses, a lone first or last short section the intro or outro, any
    other lone section a bridge.
 
-Phrases are 4- and 8-bar groups counted from each section's first bar.
+Phrases are 4- and 8-bar groups counted from each section's first bar. ``analyze_music(...,
+structure=True)`` runs this on the samples it decoded.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..types import Phrase, Section, SongStructure
+from .intensity import rms_db
 
 HOP = 512
 KERNEL_BARS = 4          # the novelty kernel's half width: sections shorter than this blur into their neighbours
@@ -42,7 +44,7 @@ def beat_features(samples: np.ndarray, sr: int, beat_times_s: np.ndarray) -> tup
     chroma = librosa.feature.chroma_stft(y=samples, sr=sr, hop_length=HOP)
     mfcc = librosa.feature.mfcc(y=samples, sr=sr, hop_length=HOP, n_mfcc=14)[1:]
     rms = librosa.feature.rms(y=samples, hop_length=HOP)
-    loud = 20.0 * np.log10(np.maximum(rms, 1e-5)) / 10.0
+    loud = rms_db(rms) / 10.0
     n = chroma.shape[1]
     edges = np.clip(np.rint(np.r_[beat_times_s, len(samples) / sr] * sr / HOP).astype(np.int64), 0, n)
     edges = np.maximum.accumulate(edges)
@@ -151,7 +153,7 @@ def _names(labels: list[int], bars: list[int], loudness: list[float]) -> list[st
 
 
 def song_structure(samples: np.ndarray, sr: int, beat_times_s: np.ndarray, beat_in_bar: np.ndarray | None,
-                   beats_per_bar: int | None, duration_s: float, intensity_db: np.ndarray | None = None) -> SongStructure:
+                   beats_per_bar: int | None, duration_s: float) -> SongStructure:
     """The song's sections and phrases (see the module's text). A song of fewer than
     ``2 * MIN_SECTION_BARS`` bars, or of unknown metre, is one section."""
     beat_times_s = np.asarray(beat_times_s, dtype=np.float64)
@@ -171,17 +173,6 @@ def song_structure(samples: np.ndarray, sr: int, beat_times_s: np.ndarray, beat_
     ends = starts[1:] + [n_bars]
     loudness = [float(np.mean(loud[first[a]:first[b - 1] + beats_per_bar])) for a, b in zip(starts, ends)]
     return _structure(starts, labels, loudness, bar_s, n_bars, duration_s)
-
-
-def analyze_structure(path, music) -> SongStructure:
-    """``song_structure`` of the audio file at ``path``, whose beats and bars ``music`` (its
-    ``analyze_music``) holds."""
-    from ..io.audio import load_audio
-    from .analysis import ANALYSIS_SR
-
-    samples, sr = load_audio(path, sr=ANALYSIS_SR, mono=True, max_duration_s=None)
-    return song_structure(samples, sr, music.beat_times_s, music.beat_in_bar, music.beats_per_bar,
-                          music.duration_s)
 
 
 def _structure(starts, labels, loudness, bar_s, n_bars, duration_s) -> SongStructure:
