@@ -141,5 +141,5 @@ if __name__ == "__main__":
         line = _one_line(exc)
         if "No module named 'numpy'" in line:   # Debian's Blender runs its glTF importer on the system's numpy
             line += " (Blender's glTF importer needs it: apt-get install python3-numpy)"
-        print(MARK + line, file=sys.stderr)
+        print(MARK + line, file=sys.stderr)   # a script in Blender: stderr is how dancesynth.export.fbx hears it
         raise
