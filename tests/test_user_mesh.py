@@ -19,8 +19,8 @@ from PIL import Image
 
 from scipy.spatial.transform import Rotation
 
-from test_gltf_character import (MANNEQUIN, MANNEQUIN_BONES, TURN, fbx_style_model, stick_mesh, vrm1_extension,
-                                 write_model, write_skinless_vrm, write_vrm0_mannequin)
+from gltf_models import (MANNEQUIN, MANNEQUIN_BONES, TURN, fbx_style_model, stick_mesh, vrm1_extension, write_model,
+                         write_skinless_vrm, write_vrm0_mannequin)
 from test_render_character import frame, needs_ffmpeg, shaded, waving_dance
 from dancesynth.export import render_video
 from dancesynth.export.vrm import vrm_bytes

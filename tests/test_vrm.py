@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from test_gltf_character import (CLIENTS, MANNEQUIN, MANNEQUIN_BONES, assert_same_rest, node_world_poses,
-                                 rest_positions, validate, write_vrm0_mannequin)
+from gltf_models import MANNEQUIN, MANNEQUIN_BONES, rest_positions, write_vrm0_mannequin
+from test_gltf_character import CLIENTS, assert_same_rest, node_world_poses, validate
 from dancesynth.errors import InputError
 from dancesynth.export.vrm import vrm_bytes, vrma_bytes
 from dancesynth.kinematics import clip_fk
