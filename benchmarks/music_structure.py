@@ -23,28 +23,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 
 
-def score(ref, est):
-    import mir_eval
-
-    ref_i = np.array([[a, b] for a, b, _ in ref])
-    est_i = np.array([[a, b] for a, b, _ in est])
-    est_i[-1, 1] = ref_i[-1, 1] = max(ref_i[-1, 1], est_i[-1, 1])
-    f = mir_eval.segment.detection(ref_i, est_i, window=0.5, trim=True)[2]
-    pw = mir_eval.segment.pairwise(ref_i, [x[2] for x in ref], est_i, [x[2] for x in est])[2]
-    return float(f), float(pw)
-
-
-def chance(ref, est, bar_s, rng):
-    """Random sections like ``est``'s: as many, starting on random 4-bar lines, random labels."""
-    lines = bar_s[4:-1:4]
-    k = min(len(est) - 1, len(lines))
-    starts = np.r_[0.0, np.sort(rng.choice(lines, size=k, replace=False))] if k else np.array([0.0])
-    ends = np.r_[starts[1:], ref[-1][1]]
-    labels = rng.integers(0, len({x[2] for x in est}), size=len(starts))
-    return score(ref, [(a, b, str(lab)) for a, b, lab in zip(starts, ends, labels)])
-
-
 def run(split: str) -> dict:
+    from dancesynth.bench.form import section_chance as chance, section_scores as score
     from dancesynth.bench.groundtruth import ground_truth_set, structure_specs
     from dancesynth.io.audio import load_audio
     from dancesynth.io.files import cache_dir

@@ -26,7 +26,14 @@ def tiny_config(tmp_path) -> BenchConfig:
                    mocap_max_clips=1, groundtruth_specs=specs, groundtruth_dir=tmp_path / "groundtruth",
                    trackers=("dp",), structure_songs=(HUNGARIAN,), structure_max_s=30.0,
                    structure_engines=("streaming", "signature", "choreography"), fig12_song=HUNGARIAN, fig12_seeds=1,
-                   fig12_engines=("signature",), recreate_clips=1, vocabulary_long_songs=1, vocabulary_long_s=30.0)
+                   fig12_engines=("signature",), recreate_clips=1, vocabulary_long_songs=1, vocabulary_long_s=30.0,
+                   form_engines=("streaming", "random_walk"), form_specs=(_shortest_form_song(),))
+
+
+def _shortest_form_song():
+    from dancesynth.bench.groundtruth import structure_specs
+
+    return next(s for s in structure_specs("tune") if s.name.startswith("form-aaba"))   # V V B V, 58 s
 
 
 @pytest.fixture(scope="module")
@@ -217,3 +224,20 @@ def test_accents_score_every_engine_beside_chance_a_random_walk_and_the_mocap(be
     assert sorted(x["beats_per_bar"] for x in s["songs"] if x["set"] == "generated") == [3, 4]
     assert s["summary"]["generated"]["streaming"]["waltz_period_3"] in (0.0, 1.0)
     assert s["summary"]["mocap"]["accent_recall"] is not None
+
+
+def test_form_scores_each_engine_with_and_without_the_song_form(bench):
+    result, _, _ = bench
+    if "skipped" in result["form"]:
+        pytest.skip(result["form"]["skipped"])
+    form = result["form"]
+    assert set(form["summary"]) == {"streaming/off", "streaming/same", "random_walk/off"}
+    same, off = form["summary"]["streaming/same"], form["summary"]["streaming/off"]
+    assert same["replayed_share"] >= 0.8 and off["replayed_share"] is None
+    assert same["form_score"] > same["form_chance"] + 0.2 and same["form_score"] > off["form_score"] + 0.2
+    song = form["songs"][0]
+    assert song["sections_true"] == "VVBV" and 0 <= song["boundary_f"] <= 1
+    assert song["live"]["live_replayed_share"] is not None
+    targets = result["targets"]
+    assert targets["live: paired beats danced as their pair, --repeat same"]["met"] is not None
+    assert "10. The song's form" in format_bench(result)

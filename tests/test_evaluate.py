@@ -35,7 +35,7 @@ def test_keys_are_the_metrics_in_order_and_json_ready():
 
 
 def test_every_metric_has_display_info():
-    groups = {"general", "beat alignment", "bars", "intensity", "smoothness", "contact", "time warp"}
+    groups = {"general", "beat alignment", "bars", "intensity", "smoothness", "contact", "time warp", "form"}
     for key, info in METRICS.items():
         assert info.group in groups and info.label and info.better, key
 

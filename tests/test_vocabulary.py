@@ -197,8 +197,11 @@ def test_the_report_says_which_clip_and_frame_every_music_beat_was_danced_from(t
     assert all(0 <= s["frame"] < lengths[s["clip"]] for s in sources)
     assert {s["file"] for s in sources} <= set(st.clip_sources)
     ids = [(s["clip"], s["source_position"]) for s in sources]
-    assert repetition(ids, data["music_beat_times_s"])["replayed_share"] == \
+    asked = [s["form_replay"] for s in sources]      # the beats the song's form replays are no loop
+    assert any(asked) and not all(asked)
+    assert repetition(ids, data["music_beat_times_s"], asked=asked)["replayed_share"] == \
         pytest.approx(data["summary"]["repetition"]["replayed_share"])
+    assert data["summary"]["repetition"]["form_replays"] == sum(asked)
 
 
 # -- the song's genre tag ---------------------------------------------------------------------------------------

@@ -10,6 +10,7 @@ from typing import Callable
 import numpy as np
 
 from .engines.beatgrid import METRE_SHARE, BeatGrid, StyleFit, beat_grid, fit_styles, fit_summary
+from .engines.form import check_repeat, form_plan
 from .engines.graph.cache import load_graph
 from .engines.graph.engine import EngineConfig, GraphEngine, MusicSegment, SegmentFrames
 from .engines.graph.meta_graph import GraphConfig
@@ -47,6 +48,10 @@ class DanceConfig:
                                         # False: each piece at one rate, on the same path (the bench compares)
     restore_spread: bool = True         # neural: widen the network's damped motion toward the mocap's spread
                                         # (engines/neural/data.restore_spread); False: the network alone
+    repeat: str = "same"                # the song's form (engines/form.py): a returning section replays its
+                                        # moves ("same"), their mirror image ("mirror"), partly ("vary"), or
+                                        # is danced afresh ("off")
+    vary: float = 0.5                   # --repeat vary: the share of each repeat's bars danced anew
 
     def __post_init__(self):
         # Choreography constraints: one "12.0=M17" string or a sequence of them / of (seconds, motif) pairs.
@@ -77,6 +82,7 @@ class DanceConfig:
         if self.lookahead_s > 0 and self.engine != "streaming":
             raise InputError(f"--lookahead is for the streaming engine, not '{self.engine}' (the global DP sees the "
                              "whole song already)")
+        check_repeat(self.repeat, self.vary)
         check_fps(self.fps)
         check_seed(self.seed)
         if not self.max_duration_s > 0:  # NaN too: it would switch the limit off
@@ -157,7 +163,7 @@ def synthesise(engine: GraphEngine, grid: BeatGrid, duration_s: float, config: D
 def analyse(song, max_duration_s: float = MAX_SONG_S) -> MusicFeatures:
     from .music import analyze_music  # librosa is heavy: import on first use
 
-    return analyze_music(path=song, fallback_bpm=FALLBACK_BPM, max_duration_s=max_duration_s)
+    return analyze_music(path=song, fallback_bpm=FALLBACK_BPM, max_duration_s=max_duration_s, structure=True)
 
 
 def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase | str | Path | None = None,
@@ -203,20 +209,29 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
     prov = make_provenance(config.engine, name, config, run, fps=config.fps, frames=clip.n_frames, timings=timings,
                            music=music, segment_s=segment_s)
     prov = prov.with_summary(**metre_summary(clip, music, run.style, prov.summary.get("warnings", [])))
-    clip.provenance = with_repetition(prov, db, music, config.fps)
+    clip.provenance = with_repetition(prov, db, music, config.fps, config)
     return clip
 
 
-def with_repetition(prov, db: MotionDatabase, music: MusicFeatures, fps: float):
+def with_repetition(prov, db: MotionDatabase, music: MusicFeatures, fps: float, config: DanceConfig | None = None):
     """``prov`` with the clip and frame danced on every music beat, and the summary's account of how
-    much of the dance replays material danced in the previous minute (``eval.repetition``)."""
+    much of the dance replays material danced in the previous minute (``eval.repetition``), the
+    replays the song's form asked for (``config.repeat``) aside."""
     from .eval.repetition import beat_sources, repetition
 
     style = db.styles.get(prov.style)
     if style is None or prov.source_frames is None or not len(prov.source_frames):
         return prov
     sources = beat_sources(prov.source_frames, fps, music.beat_times_s, style.material)
-    stats = repetition([(s["clip"], s["source_position"]) for s in sources], music.beat_times_s)
+    asked = None
+    if config is not None and len(prov.run.grid_times_s):
+        grid = np.asarray(prov.run.grid_times_s)
+        plan = form_plan(music, grid, config.repeat, config.vary)
+        at = np.clip(np.searchsorted(grid, music.beat_times_s - 1e-6), 0, len(grid) - 1)
+        asked = (plan.source[at] >= 0) & (np.abs(grid[at] - music.beat_times_s) < 1e-3)
+    if asked is not None:
+        sources = [{**s, "form_replay": bool(a)} for s, a in zip(sources, asked)]
+    stats = repetition([(s["clip"], s["source_position"]) for s in sources], music.beat_times_s, asked=asked)
     stats["material_minutes"] = style.captured_s / 60.0
     stats["mirrored_minutes"] = style.mirrored_s / 60.0
     return replace(prov, beat_sources=tuple(sources)).with_summary(repetition=stats)
@@ -331,7 +346,8 @@ def _graph_dance_fit(fit: StyleFit, music: MusicFeatures, db: MotionDatabase, co
 
         signature = database_signature(style, graph, db, config.render.signature_weight)
     render = config.render if config.accent_timing else plain_timing(config.render)
-    engine = GraphEngine(style, graph, render, fps=config.fps, signature=signature)
+    form = form_plan(music, grid.times_s, config.repeat, config.vary)
+    engine = GraphEngine(style, graph, render, fps=config.fps, signature=signature, form=form)
     segments, stats = synthesise(engine, grid, music.duration_s, config, progress)
     timings["synthesis_s"] = time.perf_counter() - t
 
@@ -344,7 +360,9 @@ def _graph_dance_fit(fit: StyleFit, music: MusicFeatures, db: MotionDatabase, co
     jumps = jumps[(jumps >= 0.0) & (jumps < music.duration_s)]
     warp_rates = np.concatenate([s.warp_rates(style.fps) for s in segments])
     extra = {"lookahead_s": config.lookahead_s, "graph_nodes": graph.n_nodes,
-             "graph_mean_in_degree": graph.mean_in_degree, "graph_cached": cached}
+             "graph_mean_in_degree": graph.mean_in_degree, "graph_cached": cached,
+             "form": form.summary(np.concatenate([segments[0].path.nodes[:1]] + [s.path.nodes[1:] for s in segments]),
+                                  engine.mirror)}
     motifs = {}
     if signature is not None:
         from .motion.motifs import chi2

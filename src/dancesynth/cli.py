@@ -12,7 +12,7 @@ import click
 
 from .cli_batch import batch
 from .cli_character import character_options, characters, on_dance_character, write_moved, write_on_character
-from .cli_dance import dance_config, dance_options
+from .cli_dance import dance_config, dance_options, form_line
 from .cli_live import render, serve, stream
 from .cli_support import Progress, writable, write_json
 from .defaults import DEFAULT_FPS
@@ -88,8 +88,9 @@ def dance(song, output, character, bone_map, database, report_path, quiet, **opt
     rep = s.get("repetition")
     if rep:
         mirrored = f" (+ {rep['mirrored_minutes']:.1f} mirrored)" if rep.get("mirrored_minutes") else ""
+        form = f", the form's {rep['form_replays']} replayed beats aside" if rep.get("form_replays") else ""
         click.echo(f"material  {rep['material_minutes']:.1f} min captured{mirrored}; {rep['replayed_share']:.0%} of the "
-                   f"beats replay a move danced in the previous {rep['window_s']:g} s (longest run "
+                   f"beats replay a move danced in the previous {rep['window_s']:g} s{form} (longest run "
                    f"{rep['longest_repeat_beats']} beats)")
     if s.get("beats_per_bar"):
         period = s.get("dance_period_beats")
@@ -97,6 +98,9 @@ def dance(song, output, character, bone_map, database, report_path, quiet, **opt
                    + (f"; the dance's energy repeats every {period} beats" if period else "")
                    + (f" (styles tried for it: {', '.join(s['styles_tried_for_metre'])})"
                       if s.get("styles_tried_for_metre") else ""))
+    form = s.get("form")
+    if form and form.get("sections"):
+        click.echo("form      " + form_line(form))
     if s["engine"] == "streaming":
         ahead = f" (each chosen seeing {s['lookahead_s']:g} s ahead)" if s.get("lookahead_s") else ""
         click.echo(f"engine    streaming: {s['segments']} segment(s) of {s['segment_s']:g} s{ahead}, "

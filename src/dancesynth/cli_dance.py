@@ -23,6 +23,13 @@ _OPTIONS = [
     click.option("--follow-signature", is_flag=True,
                  help="Streaming engine: also keep the genre's motif signature (Aristidou et al.'s global "
                       "structure)."),
+    click.option("--repeat", type=click.Choice(["same", "mirror", "vary", "off"]), default="same",
+                 show_default=True,
+                 help="The song's form: a returning section or phrase replays the moves danced the first time "
+                      "(same), their mirror image (mirror), its first bars with the rest new (vary, see --vary), "
+                      "or is danced afresh (off). Sections heard for the first time prefer new moves."),
+    click.option("--vary", type=float, default=0.5, show_default=True, metavar="SHARE",
+                 help="With --repeat vary: the share of each replayed phrase's bars danced anew (0 = same, 1 = new)."),
     click.option("--segment-seconds", type=float, default=SEGMENT_S, show_default=True,
                  help="Streaming segment length."),
     click.option("--lookahead", "lookahead", type=float, default=0.0, show_default=True, metavar="SECONDS",
@@ -46,6 +53,7 @@ _OPTIONS = [
                       "loudness standardised by what has been heard, blends and foot lock (README: 'Where we "
                       "depart from or add to the paper'). With --engine neural: the network's motion without the "
                       "spread post-filter; its beat warp, foot lock and hand clearance stay on (docs/neural.md). "
+                      "The song's form is not followed (--repeat off). "
                       "Not for --engine choreography, which has no paper preset."),
 ]
 
@@ -57,13 +65,13 @@ def dance_options(command):
 
 
 def dance_config(*, style, engine, recreate, motif_at, follow_signature, segment_seconds, lookahead, fps, seed,
-                 max_minutes, ths, thr, paper, model):
+                 max_minutes, ths, thr, paper, model, repeat="same", vary=0.5):
     """The ``DanceConfig`` the options of ``dance_options`` ask for."""
     from .api import DanceConfig
 
     config = DanceConfig(style=style, engine=engine, segment_s=segment_seconds, lookahead_s=lookahead, fps=fps,
                          seed=seed, max_duration_s=max_minutes * 60.0, motif_at=motif_at, recreate=recreate,
-                         follow_signature=follow_signature, model=model)
+                         follow_signature=follow_signature, model=model, repeat=repeat, vary=vary)
     from .engines.graph.engine import EngineConfig
     from .engines.graph.meta_graph import GraphConfig
 
@@ -72,7 +80,8 @@ def dance_config(*, style, engine, recreate, motif_at, follow_signature, segment
             raise InputError("--paper has no preset for the choreography engine (its mixer is Aristidou et al.'s "
                              "with the additions docs/choreography.md lists, which have no switch back): leave out "
                              "--paper, or use it with --engine streaming, global or neural")
-        config = replace(config, graph=GraphConfig.paper(), render=EngineConfig.paper(), restore_spread=False)
+        config = replace(config, graph=GraphConfig.paper(), render=EngineConfig.paper(), restore_spread=False,
+                         repeat="off")
     if ths is not None or thr is not None:
         try:
             graph = replace(config.graph, **{k: v for k, v in (("ths", ths), ("thr", thr)) if v is not None})
@@ -80,3 +89,16 @@ def dance_config(*, style, engine, recreate, motif_at, follow_signature, segment
             raise InputError(f"{exc}: check --ths and --thr") from None
         config = replace(config, graph=graph)
     return config
+
+
+def form_line(form: dict) -> str:
+    """The summary's line on the song's form: its sections, and what the dance replayed of them."""
+    names = " ".join(f"{s['label']}:{s['name']}" for s in form["sections"])
+    if form["repeat"] == "off":
+        return f"{names}; --repeat off: danced without replaying"
+    bars = sum(s.get("bars_replayed", 0) for s in form["sections"])
+    total = sum(s["bars"] for s in form["sections"])
+    line = f"{names}; --repeat {form['repeat']}: {bars} of {total} bars replay an earlier one"
+    if form.get("replayed_share") is not None:
+        line += f", {form['replayed_share']:.0%} of their beats danced as it was"
+    return line + (f" ({form['note']})" if form.get("note") else "")

@@ -24,11 +24,16 @@ from .defaults import DEFAULT_FPS, SEGMENT_S
 @click.option("--database", type=click.Path(file_okay=False, path_type=Path),
               help="A database folder or a folder of BVH files (default: the bundled database).")
 @click.option("--follow-signature", is_flag=True, help="Also keep the genre's motif signature as the dance goes.")
+@click.option("--repeat", type=click.Choice(["same", "mirror", "vary", "off"]), default="same", show_default=True,
+              help="When the music repeats what was heard (two bars like two earlier ones), dance again what was "
+                   "danced then: the same moves, their mirror image, its phrases' first bars (vary), or not (off).")
+@click.option("--vary", type=float, default=0.5, show_default=True, metavar="SHARE",
+              help="With --repeat vary: the share of each replayed phrase's bars danced anew.")
 @click.option("--fast", is_flag=True, help="Read a file as fast as it decodes instead of at real-time pace.")
 @character_options
 @click.option("-q", "--quiet", is_flag=True, help="Only the summary, no line per segment.")
-def stream(source, output, segment_seconds, style, fps, seed, database, follow_signature, fast, character, bone_map,
-           quiet):
+def stream(source, output, segment_seconds, style, fps, seed, database, follow_signature, repeat, vary, fast,
+           character, bone_map, quiet):
     """Dance to SOURCE as it arrives: an audio file (played at real-time pace), '-' for standard input,
     or an http(s) URL of an audio stream. Motion is synthesised segment by segment (Xu et al.'s double
     buffer) and appended to the BVH as it goes."""
@@ -53,7 +58,7 @@ def stream(source, output, segment_seconds, style, fps, seed, database, follow_s
                        f"{'  LATE' if r.late else ''}  ready at {r.ready_s:6.2f} s")
 
     config = LiveConfig(segment_s=segment_seconds, style=style, fps=fps, seed=seed, database=database,
-                        follow_signature=follow_signature)
+                        follow_signature=follow_signature, repeat=repeat, vary=vary)
     with AudioSource(source, realtime=not fast) as src, CompleteBVHWriter(output) as writer:
         sink = writer.append if on_character is None else (
             lambda clip: writer.append(on_character.character.in_own_units(on_character(clip))))
@@ -70,6 +75,13 @@ def stream(source, output, segment_seconds, style, fps, seed, database, follow_s
                + (f"; {summary['silence_s']:.1f} s of stalls bridged" if summary["silence_s"] > 0 else ""))
     if summary["motif_chi2"] is not None:
         click.echo(f"motifs    chi2 to the genre template {summary['motif_chi2']:.3f}")
+    form = summary["form"]
+    if form["repeat"] != "off":
+        heard = ", ".join(f"bar {b + 1} repeats bar {a + 1}" for b, a in form["repeats"]) or "no repeat heard"
+        share = f", {form['replayed_share']:.0%} of them as first danced" if form.get("replayed_share") is not None \
+            else ""
+        click.echo(f"form      {heard}; {form['replay_beats']} beats replayed{share}; sections heard at bars "
+                   + " ".join(str(b + 1) for b in form["section_bars"]))
     click.echo(f"wrote     {output} ({summary['frames']} frames at {fps:g} fps)")
     if died:  # the BVH is complete up to there; the user must still learn that the source died
         raise InputError(f"{died}; {output} holds the dance up to then")

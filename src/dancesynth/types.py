@@ -182,6 +182,9 @@ class SongStructure:
 
     sections: tuple[Section, ...]
     phrases: tuple[Phrase, ...] = ()
+    bar_starts_s: tuple[float, ...] = ()    # where each bar starts (the first at its downbeat)
+    similarity: np.ndarray | None = field(default=None, compare=False)  # (bars, bars) how alike each two
+                                            # bars sound (notes in order and timbre; the structure score's)
 
     def report(self, first_bar: int = 1) -> dict:
         """JSON-ready: what ``beats --json`` writes, bars numbered from ``first_bar`` (the first downbeat's)."""

@@ -13,7 +13,7 @@ from ..types import MusicFeatures
 MUSIC_DIR = Path(__file__).resolve().parents[1] / "data" / "music"
 DEFAULT_SONG = "Kevin_MacLeod_-_Vibe_Ace.ogg"  # the README's demo song
 SECTIONS = ("fig4", "scaling", "pipeline", "quality", "beat_tracking", "structure", "accents", "realism",
-            "vocabulary")
+            "vocabulary", "form")
 
 Progress = Callable[[str], None]
 
@@ -82,6 +82,9 @@ class BenchConfig:
     vocabulary_split: str = "test"        # the long songs reported ("tune": those the constants were chosen on)
     vocabulary_long_songs: int = 10       # 3-minute generated songs, 4/4 and 3/4
     vocabulary_long_s: float = 180.0
+    # 10. The song's form (bench.form): sections found, and every engine with --repeat off and same.
+    form_engines: tuple[str, ...] = ("streaming", "global", "choreography", "neural", "random_walk")
+    form_specs: tuple | None = None      # SongSpecs of known form (None: groundtruth.structure_specs of the split)
 
     @classmethod
     def full(cls) -> "BenchConfig":
@@ -94,27 +97,36 @@ class BenchConfig:
                        quality_songs=(DEFAULT_SONG,), quality_max_s=60.0, mocap_max_clips=6,
                        groundtruth_quick=True, structure_songs=(DEFAULT_SONG,), structure_seeds=1, fig12_seeds=2,
                        fig12_song=DEFAULT_SONG, recreate_clips=4, accent_songs=(DEFAULT_SONG,),
-                       realism_songs=(DEFAULT_SONG,), realism_seeds=1, vocabulary_long_songs=4)
+                       realism_songs=(DEFAULT_SONG,), realism_seeds=1, vocabulary_long_songs=4,
+                       form_specs=tuple(_quick_form_specs()))
+
+
+def _quick_form_specs():
+    from .groundtruth import structure_specs
+
+    return structure_specs("test")[:2]
 
 
 def load_song(name: str, max_s: float | None = None) -> MusicFeatures:
-    """Analyse a bundled song (by file name, or any path), optionally keeping its first ``max_s`` seconds."""
+    """Analyse a bundled song (by file name, or any path) as ``dance`` does, its form included, optionally
+    keeping its first ``max_s`` seconds."""
     from ..music import analyze_music
 
     path = Path(name) if Path(name).is_file() else MUSIC_DIR / name
-    music = analyze_music(path=path)
+    music = analyze_music(path=path, structure=True)
     return truncate_music(music, max_s) if max_s else music
 
 
 def truncate_music(music: MusicFeatures, max_s: float) -> MusicFeatures:
-    """The first ``max_s`` seconds of analysed music: the beats before it and their intervals' loudness."""
+    """The first ``max_s`` seconds of analysed music: the beats before it and their intervals' loudness
+    (not its form, which was found in the whole song)."""
     if music.duration_s <= max_s:
         return music
     keep = int(np.searchsorted(music.beat_times_s, max_s, side="right"))
     keep = max(keep, 2)
     return replace(music, duration_s=float(max(max_s, music.beat_times_s[keep - 1])),
                    beat_times_s=music.beat_times_s[:keep], intensity_db=music.intensity_db[:keep - 1],
-                   beat_in_bar=None if music.beat_in_bar is None else music.beat_in_bar[:keep])
+                   beat_in_bar=None if music.beat_in_bar is None else music.beat_in_bar[:keep], structure=None)
 
 
 def largest_style(db):

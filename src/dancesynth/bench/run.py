@@ -23,6 +23,8 @@ others still run):
    and the mocap floor against clips held out of the salsa style with the most takes.
 9. ``vocabulary`` -- what the database can dance: minutes per genre, the tempo map,
    repetition on 3-minute songs, and the guards per style.
+10. ``form`` -- the song's form: sections found on generated songs of known form, and every
+   engine's structure-consistency score with ``--repeat off`` and ``same``, with the guards.
 
 ``run_bench`` writes ``bench.json`` into ``out_dir`` and returns the same dict;
 ``format_bench`` turns it into the tables (same layout every run of a mode).
@@ -57,7 +59,8 @@ TITLES = {"fig4": "1. Synthesis time per segment (Xu et al. Fig. 4)",
           "structure": "6. Global structure: motifs and signatures (Aristidou et al.)",
           "accents": "7. Visible accents on beats and bars",
           "realism": "8. Realism and diversity against held-out mocap (FID_k, FID_g, Div_k, Div_g)",
-          "vocabulary": "9. Vocabulary: material per genre and tempo, repetition, guards per style"}
+          "vocabulary": "9. Vocabulary: material per genre and tempo, repetition, guards per style",
+          "form": "10. The song's form: sections found, repeats danced again"}
 
 
 def machine_info() -> dict:
@@ -118,7 +121,7 @@ def run_bench(*, quick: bool, out_dir: Path, progress: Progress | None = None,
 
 
 def _run_section(name: str, cfg: BenchConfig, shared: dict, progress, out_dir: Path) -> dict:
-    if name in ("fig4", "scaling", "pipeline", "quality", "structure", "accents", "realism", "vocabulary") \
+    if name in ("fig4", "scaling", "pipeline", "quality", "structure", "accents", "realism", "vocabulary", "form") \
             and "db" not in shared:
         from ..motion.database import open_database
 
@@ -167,6 +170,14 @@ def _run_section(name: str, cfg: BenchConfig, shared: dict, progress, out_dir: P
         if shutil.which("fluidsynth") is None:
             raise _Skip("fluidsynth is not installed (apt-get install fluidsynth timgm6mb-soundfont)")
         return vocabulary(cfg, shared["db"], progress)
+    if name == "form":
+        import shutil
+
+        from .form import form_section
+
+        if shutil.which("fluidsynth") is None:
+            raise _Skip("fluidsynth is not installed (apt-get install fluidsynth timgm6mb-soundfont)")
+        return form_section(cfg, shared["db"], progress)
     if name == "beat_tracking":
         import shutil
 
@@ -181,6 +192,15 @@ def _run_section(name: str, cfg: BenchConfig, shared: dict, progress, out_dir: P
         except InputError as exc:  # no soundfont, a render failed: say what to install
             raise _Skip(str(exc)) from None
     raise ValueError(name)
+
+
+def _form_music(key: str):
+    return lambda s: s["music"][key]
+
+
+def _lowest_same(key: str):
+    """The lowest mean of ``key`` over the engines dancing with ``--repeat same``."""
+    return lambda s: min(v[key] for k, v in s["summary"].items() if k.endswith("/same"))
 
 
 def _accent(subset: str, engine: str, key: str):
@@ -300,6 +320,16 @@ TARGETS = {
         "vocabulary", lambda s: max(g["foot_skate_vs_mocap"] for g in s["guards"].values()), 1.1),
     "p99 joint speed / the style's mocap's, every style (mean), distance from 1": (
         "vocabulary", lambda s: max(abs(g["joint_speed_p99_vs_mocap"] - 1.0) for g in s["guards"].values()), 0.25),
+    # The song's form (issue 32): sections found, and every engine dancing a returning section again.
+    **{f"{what}": ("form", _form_music(key), limit, "at least") for what, key, limit in (
+        ("sections found: boundary F at ±0.5 s, generated songs of known form", "boundary_f", 0.8),
+        ("sections found: pairwise label F, generated songs of known form", "pairwise_f", 0.8),
+        ("live: offline section boundaries found within a bar", "boundaries_within_a_bar", 0.8),
+        ("live: paired beats danced as their pair, --repeat same", "live_replayed_share", 0.6))},
+    **{what: ("form", _lowest_same(key), limit, "at least") for what, key, limit in (
+        ("structure consistency (music vs dance bars), every engine with --repeat same, lowest mean",
+         "form_score", 0.5),
+        ("paired beats danced as their pair, --repeat same, every engine, lowest", "replayed_share", 0.8))},
 }
 
 
@@ -348,10 +378,12 @@ def format_bench(result: dict) -> str:
     from .speed import format_fig4, format_pipeline, format_scaling
     from .structure import format_structure
     from .vocabulary import format_vocabulary
+    from .form import format_form
 
     formatters = {"fig4": format_fig4, "scaling": format_scaling, "pipeline": format_pipeline,
                   "quality": format_quality, "beat_tracking": format_beat_tracking, "structure": format_structure,
-                  "accents": format_accents, "realism": format_realism, "vocabulary": format_vocabulary}
+                  "accents": format_accents, "realism": format_realism, "vocabulary": format_vocabulary,
+                  "form": format_form}
     m = result.get("machine", {})
     timings = result.get("timings_s", {})
     out = [f"dancesynth {result.get('dancesynth', '?')} bench ({result.get('mode', '?')}), {result.get('started', '')}",

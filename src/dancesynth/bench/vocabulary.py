@@ -83,9 +83,11 @@ def _songs(cfg: BenchConfig, progress) -> list[dict]:
 
 
 def _strict(sources: tuple) -> float:
-    """The replayed share with a take's mirror image counted as the take itself."""
+    """The replayed share with a take's mirror image counted as the take itself (the song's form's replays
+    aside, as ``dance``'s own count leaves them)."""
     ids = [(s["clip"].removesuffix(" (mirrored)"), s["source_position"]) for s in sources]
-    return repetition(ids, [s["time_s"] for s in sources])["replayed_share"] if ids else 0.0
+    asked = [s.get("form_replay", False) for s in sources]
+    return repetition(ids, [s["time_s"] for s in sources], asked=asked)["replayed_share"] if ids else 0.0
 
 
 def dance_song(song: dict, db, style: str | None = None) -> tuple:

@@ -122,6 +122,8 @@ METRICS: dict[str, MetricInfo] = {
     "warp_frac_over_25pct": _m("beat pieces warped by more than 25 %", "", "lower", "time warp"),
     "warp_rate_min": _m("slowest playback rate", "", "≈1", "time warp"),
     "warp_rate_max": _m("fastest playback rate", "", "≈1", "time warp"),
+    "form_score": _m("structure consistency: music vs dance bar similarity (r, eval.form)", "", "higher", "form"),
+    "form_chance": _m("... with the dance's bars shuffled within sections", "", "info", "form"),
 }
 
 

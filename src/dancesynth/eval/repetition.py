@@ -43,9 +43,11 @@ def beat_sources(source_frames, fps: float, beat_times_s, style) -> list[dict]:
              "source_beat": int(b), "source_position": float(p)} for c, f, b, p in zip(clip, flat, nearest, position)]
 
 
-def repetition(source_beats, beat_times_s, *, window_s: float = WINDOW_S) -> dict:
+def repetition(source_beats, beat_times_s, *, window_s: float = WINDOW_S, asked=None) -> dict:
     """``{"replayed_share", "longest_repeat_beats", "distinct_source_beats", "beats"}`` of a dance whose
-    music beat k shows source beat ``source_beats[k]`` (any hashable id) at ``beat_times_s[k]``."""
+    music beat k shows source beat ``source_beats[k]`` (any hashable id) at ``beat_times_s[k]``.
+    ``asked`` (bool per beat): beats the song's form asked to replay (``engines/form.py``); they are
+    not counted as loops, and ``form_replays`` says how many there were."""
     ids = list(source_beats)
     times = np.asarray(beat_times_s, dtype=np.float64)
     if len(ids) != len(times):
@@ -56,9 +58,12 @@ def repetition(source_beats, beat_times_s, *, window_s: float = WINDOW_S) -> dic
         seen = last_seen.get(b)
         replayed[k] = seen is not None and t - seen <= window_s
         last_seen[b] = t
+    form = np.zeros(len(ids), bool) if asked is None else np.asarray(asked, bool)
+    replayed &= ~form
     longest = run = 0
     for r in replayed:
         run = run + 1 if r else 0
         longest = max(longest, run)
     return {"replayed_share": float(replayed.mean()) if len(ids) else 0.0, "longest_repeat_beats": int(longest),
-            "distinct_source_beats": len(set(ids)), "beats": len(ids), "window_s": float(window_s)}
+            "distinct_source_beats": len(set(ids)), "beats": len(ids), "window_s": float(window_s),
+            "form_replays": int(form.sum())}

@@ -80,7 +80,7 @@ def evaluate_files(dance_path: Path, song_path: Path, *, reference_path: Path | 
     from ..music import analyze_music
 
     dance = read_bvh(dance_path)
-    music = analyze_music(path=song_path)
+    music = analyze_music(path=song_path, structure=True)
     _check_durations(dance, music, dance_path, song_path)
     report = load_dance_report(report_path) if report_path is not None else None
     reference = read_bvh(reference_path) if reference_path is not None else None
@@ -123,6 +123,14 @@ def evaluate_dance(dance: MotionClip, music: MusicFeatures, *, report: dict | No
     }
     if reference is not None:
         result["reference"] = evaluate(reference, mocap=reference_of(reference), **common)
+    if music.structure is not None:   # does the dance follow the song's form (eval.form)
+        from .form import form_score
+
+        result["song"]["sections"] = music.structure.report()["sections"]
+        for key in ("dance", "reference"):
+            if key in result and music.beats_per_bar:
+                result[key].update(form_score(dance if key == "dance" else reference, music.structure,
+                                              music.beats_per_bar))
     return result
 
 

@@ -23,6 +23,7 @@ from typing import Callable
 import numpy as np
 
 from ..engines.beatgrid import choose_style
+from ..engines.form import check_repeat
 from ..engines.graph.cache import load_graph
 from ..engines.graph.engine import EngineConfig, GraphEngine, MusicSegment
 from ..errors import InputError
@@ -30,6 +31,7 @@ from ..motion.database import MotionDatabase, open_database
 from ..motion.motifs import chi2
 from ..types import DEFAULT_FPS, FALLBACK_BPM, SEGMENT_S, MotionClip, check_fps, check_seed
 from .beats import StreamingBeatTracker
+from .form import LiveForm
 from .sources import AudioSource, wait_for_audio
 
 
@@ -44,8 +46,11 @@ class LiveConfig:
     first_audio_timeout_s: float = 20.0
     render: EngineConfig = field(default_factory=EngineConfig)
     follow_signature: bool = False     # keep the genre's motif signature (engines/graph/signature.py)
+    repeat: str = "same"               # the song's form, as heard (live/form.py): same, mirror, vary or off
+    vary: float = 0.5
 
     def __post_init__(self):
+        check_repeat(self.repeat, self.vary)
         check_seed(self.seed)
         check_fps(self.fps)
 
@@ -115,9 +120,11 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
         db.styles_of(config.style)  # an unknown style fails now, not after the first segment
     stall_s = config.stall_s if config.stall_s is not None else config.segment_s
     tracker = StreamingBeatTracker(source.sr)
+    form = LiveForm(source.sr, config.repeat, config.vary)
     first = wait_for_audio(source, config.first_audio_timeout_s)
     t0 = time.perf_counter()  # latencies count from the first audio, as a listener hears it
     tracker.push(first.samples)
+    form.push(first.samples)
     last_audio = t0
     silence_s = 0.0
     heard_s = first.samples.size / source.sr
@@ -145,6 +152,7 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
                 now = time.perf_counter()
                 if chunk is not None and chunk.samples.size:
                     tracker.push(chunk.samples)
+                    form.push(chunk.samples)
                     heard_s += chunk.samples.size / source.sr
                     last_audio = now
                     stalled = False
@@ -153,6 +161,7 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
                     stalled = True
                     gap = now - last_audio
                     tracker.push(np.zeros(int(gap * source.sr), dtype=np.float32))
+                    form.push(np.zeros(int(gap * source.sr), dtype=np.float32))
                     heard_s += gap
                     silence_s += gap
                     last_audio = now
@@ -198,10 +207,11 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
                 positions = np.concatenate((positions, (positions[-1] + np.arange(1, n_after + 1)) % metre))
                 last = inten[-1] if inten.size else 0.0
                 inten = np.concatenate((inten, np.full(n_after, last)))
-            segment = MusicSegment(times, inten, remaining_beats=None, end_s=end_s, bar_position=positions,
-                                   beats_per_bar=metre)
             new_beats = tuple(float(t) for t in (times if index == 0 else times[1:]))
             new_bars = tuple(int(p) for p in (positions if index == 0 else positions[1:]))
+            form.add_beats(new_beats, new_bars, metre)   # what the music repeats, as heard so far
+            segment = MusicSegment(times, inten, remaining_beats=None, end_s=end_s, bar_position=positions,
+                                   beats_per_bar=metre, form=form.plan if config.repeat != "off" else None)
             futures.append(executor.submit(worker.run, index, segment, heard_s, config.segment_s, silence_s,
                                            new_beats, tempo, new_bars, metre))
             prev_beat, prev_bar = float(times[-1]), int(positions[-1])
@@ -229,6 +239,10 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
         "late_segments": sum(r.late for r in reports),
         "first_motion_ready_s": reports[0].ready_s if reports else None,
         "first_audio_s": reports[0].audio_end_s if reports else None,
+        "form": {**form.summary(), "bar_starts_s": form.bar_starts_s().tolist(),
+                 **(form.plan.replayed(worker.state.danced) if worker else {}),
+                 "beat_times_s": form.beat_times_s().tolist(),   # the beats danced, and the graph node of each
+                 "danced": [] if worker is None else worker.state.danced.tolist()},
     }
 
 

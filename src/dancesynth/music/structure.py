@@ -163,19 +163,19 @@ def song_structure(samples: np.ndarray, sr: int, beat_times_s: np.ndarray, beat_
         return SongStructure((Section(0.0, float(duration_s), "A", "verse", 0, 0),), ())
     bar_s = np.r_[beat_times_s[first], duration_s]
     bar_s[0] = 0.0   # a pickup belongs to the first bar
-    if n_bars < 2 * MIN_SECTION_BARS:
-        return _structure([0], [0], [0.0], bar_s, n_bars, duration_s)
     chroma, timbre = beat_features(samples, sr, beat_times_s)
     sim = bar_similarity(chroma, timbre, first, beats_per_bar)
+    if n_bars < 2 * MIN_SECTION_BARS:
+        return _structure([0], [0], [0.0], bar_s, n_bars, duration_s, sim, beat_times_s[first])
     starts = boundaries(novelty(bar_similarity(chroma, timbre, first, beats_per_bar, ordered=False)))
     labels = section_labels(sim, starts)
     loud = timbre[:, -1]
     ends = starts[1:] + [n_bars]
     loudness = [float(np.mean(loud[first[a]:first[b - 1] + beats_per_bar])) for a, b in zip(starts, ends)]
-    return _structure(starts, labels, loudness, bar_s, n_bars, duration_s)
+    return _structure(starts, labels, loudness, bar_s, n_bars, duration_s, sim, beat_times_s[first])
 
 
-def _structure(starts, labels, loudness, bar_s, n_bars, duration_s) -> SongStructure:
+def _structure(starts, labels, loudness, bar_s, n_bars, duration_s, sim, downbeats_s) -> SongStructure:
     ends = list(starts[1:]) + [n_bars]
     bars = [b - a for a, b in zip(starts, ends)]
     names = _names(list(labels), bars, list(loudness))
@@ -184,4 +184,4 @@ def _structure(starts, labels, loudness, bar_s, n_bars, duration_s) -> SongStruc
                      for a, b, lab, name in zip(starts, ends, labels, names))
     phrases = tuple(Phrase(float(bar_s[a + k]), int(a + k), int(min(size, b - a - k)), size)
                     for size in PHRASE_BARS for a, b in zip(starts, ends) for k in range(0, b - a, size))
-    return SongStructure(sections, phrases)
+    return SongStructure(sections, phrases, tuple(float(t) for t in downbeats_s), sim)

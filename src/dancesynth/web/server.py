@@ -470,7 +470,9 @@ def _make_dance(song_path: Path, style: str | None, seed: int | None, engine: st
               "beats": [round(float(t), 4) for t in clip.provenance.music_beat_times_s],
               "style": s["style"], "default_tempo": bool(s["default_tempo"]), "engine": s["engine"],
               "character": target.name, "mesh": made.has_mesh, "joints": list(moved.skeleton.names),
-              "sections": sections, "beats_per_bar": int(s["beats_per_bar"]) if s.get("beats_per_bar") else None}
+              "sections": sections, "beats_per_bar": int(s["beats_per_bar"]) if s.get("beats_per_bar") else None,
+              "form": [{"start_s": round(float(x["start_s"]), 3), "label": x["label"], "name": x["name"],
+                        "replays": x.get("repeats")} for x in s.get("form", {}).get("sections", [])]}
     return result, made
 
 

@@ -22,6 +22,7 @@ from ...motion.words import clip_words
 from ...provenance import EngineRun
 from ...types import MotionClip, MusicFeatures
 from ..beatgrid import StyleFit, beat_grid, fit_style, fit_summary
+from ..form import form_plan
 from ..timing import plain_timing
 from .level import constraint_beats, parse_motif_at, plan_motifs, recreate_plan
 from .mixer import MixerConfig, mix, substitute_motifs, word_bank
@@ -124,9 +125,16 @@ def choreography_dance(music: MusicFeatures, db: MotionDatabase, config, *, timi
     danced = substitute_motifs(bank, model.centroids)[plan]
     free = np.full(n, ref is None)  # a re-creation and the user's constraints are danced as planned
     free[list(fixed)] = False
+    # A returning section replays its motifs and words (a re-creation follows its reference's form
+    # instead); the user's --motif-at beats stay theirs.
+    form = form_plan(music, grid.times_s, config.repeat if ref is None else "off", config.vary)
+    if fixed:
+        form = replace(form, source=np.where(np.isin(np.arange(len(form.source)), list(fixed)), -1, form.source))
+    held = form.held(plan)
+    plan = np.where(held >= 0, held, plan)
     result = mix(style, bank, danced, grid.times_s, music.duration_s, fps=config.fps, rng=rng, config=mixer,
                  beat_count=grid.count, bar_position=grid.bar_position, beats_per_bar=grid.beats_per_bar,
-                 free=free)
+                 free=free, form=form)
     timings["synthesis_s"] = time.perf_counter() - t
     p = result.pieces
     jumps = p.t0[p.jump]
@@ -135,7 +143,8 @@ def choreography_dance(music: MusicFeatures, db: MotionDatabase, config, *, timi
     extra = {"graph_cached": True, "motifs": model.k,
              "motif_chi2": chi2(model.templates[style.genre], model.signature(result.motifs)),
              "plan_followed": float(np.mean(result.motifs == plan)), "constraints": len(fixed),
-             "recreate": None if ref is None else ref.path}
+             "recreate": None if ref is None else ref.path,
+             "form": form.summary(result.words)}
     motifs = {"motif_ids": result.motifs, "motif_plan": plan,
               "motif_constraints": {int(b): int(m) for b, m in fixed.items()},
               "word_frames": np.stack([p.f0, p.f1], axis=1).astype(np.int64)}

@@ -30,6 +30,7 @@ from ...motion.motifs import style_motifs
 from ...motion.roles import find_roles
 from ...motion.words import MotionWords
 from ..footlock import FootLockState, lock_feet
+from ..form import FormPlan
 from ..stitch import Pieces, StitchState, render
 from ..timing import beat_ease, ease_within, speed_room, within_room
 
@@ -189,7 +190,8 @@ def _candidates(bank: WordBank, motifs, members: dict, depth: int, free) -> list
 
 def choose_words(bank: WordBank, motifs: np.ndarray, durations_s: np.ndarray, rng: np.random.Generator,
                  config: MixerConfig = MixerConfig(), word_cost: np.ndarray | None = None,
-                 word_s: np.ndarray | None = None, free: np.ndarray | None = None) -> np.ndarray:
+                 word_s: np.ndarray | None = None, free: np.ndarray | None = None,
+                 forced: np.ndarray | None = None) -> np.ndarray:
     """The word (index into ``bank``) danced on each beat interval, as a rule one of that beat's motif.
 
     The paper picks, beat by beat, the word whose first poses best continue the previous
@@ -201,11 +203,14 @@ def choose_words(bank: WordBank, motifs: np.ndarray, durations_s: np.ndarray, rn
     added per word; the seed breaks ties at the start. ``word_s`` (W,): each word's length as
     it will be played (default: from its first beat to its last). Beyond the paper, where
     ``free`` allows it the mocap's own continuation may stand in for the plan for up to
-    ``off_plan_depth`` beats, at ``off_plan_cost`` a beat (``_candidates``).
+    ``off_plan_depth`` beats, at ``off_plan_cost`` a beat (``_candidates``). ``forced`` (B,): the word
+    each beat must dance (-1: free), e.g. a repeated section's words (``engines/form.py``).
     """
     members = {int(m): np.flatnonzero(bank.motif == m) for m in np.unique(motifs)}
     log_len = np.log2(np.maximum(bank.duration_s(np.arange(len(bank))) if word_s is None else word_s, 1e-3))
     cands = _candidates(bank, motifs, members, config.off_plan_depth, free)
+    if forced is not None:
+        cands = [c if w < 0 else np.array([w]) for c, w in zip(cands, forced)]
     extra = np.zeros(len(bank)) if word_cost is None else word_cost
     unary = [config.tempo_weight * (log_len[c] - np.log2(d)) ** 2 + extra[c]
              + config.off_plan_cost * (bank.motif[c] != m) for c, d, m in zip(cands, durations_s, motifs)]
@@ -268,12 +273,14 @@ class Mix:
 def mix(style: Style, bank: WordBank, motifs: np.ndarray, beat_times_s: np.ndarray, end_s: float, *,
         fps: float, rng: np.random.Generator, config: MixerConfig = MixerConfig(),
         beat_count: np.ndarray | None = None, bar_position: np.ndarray | None = None,
-        beats_per_bar: int | None = None, free: np.ndarray | None = None) -> Mix:
+        beats_per_bar: int | None = None, free: np.ndarray | None = None, form: FormPlan | None = None) -> Mix:
     """Dance ``motifs[i]`` on beat interval ``beat_times_s[i] → [i+1]``, rendered up to ``end_s``.
 
     ``beat_count``, ``bar_position``, ``beats_per_bar``: the beats' counts and metre, as in ``BeatGrid``.
     ``free`` (B,): beats where the mocap's own continuation may stand in for the plan (default all;
-    ``config.off_plan_depth``)."""
+    ``config.off_plan_depth``). ``form``: the song's form on these beats; a beat of a repeated section
+    dances the word its pair danced (the words are chosen twice: the second time with the first's
+    words held on both)."""
     times = np.asarray(beat_times_s, dtype=np.float64)
     accents = cached_accent_beats(style, window=config.accent_window) if config.accent_window > 0 else None
     word_cost = word_s = None
@@ -288,6 +295,9 @@ def mix(style: Style, bank: WordBank, motifs: np.ndarray, beat_times_s: np.ndarr
         calm = config.speed_weight * word_pace(style, bank) ** 2
         word_cost = calm if word_cost is None else word_cost + calm
     chosen = choose_words(bank, np.asarray(motifs), np.diff(times), rng, config, word_cost, word_s, free)
+    if form is not None and (form.source[:len(chosen)] >= 0).any():
+        chosen = choose_words(bank, np.asarray(motifs), np.diff(times), rng, config, word_cost, word_s, free,
+                              forced=form.held(chosen))
     f0, f1 = bank.words.start[chosen], bank.words.end[chosen]
     jump = np.r_[False, f0[1:] != f1[:-1]]
     if accents is not None:

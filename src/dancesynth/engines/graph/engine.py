@@ -13,6 +13,11 @@ whole song with intensities standardised over the whole song.
 With a ``SignatureTarget`` (``signature.py``, beyond the paper) the streaming step
 also favours words whose motif the dance owes its genre's template, and counts the
 motifs it danced in its state.
+
+With a ``FormPlan`` (``engines/form.py``, beyond the paper) both follow the song's form:
+a beat of a repeated section is rewarded for arriving at the node its pair in the first
+occurrence arrived at, a section heard for the first time avoids every node danced so far,
+and a section's first beat asks for a bigger move.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from ...motion.database import Style
 from ...motion.roles import JointRoles, find_roles
 from ...types import DEFAULT_FPS
 from ..footlock import FootLockState, lock_feet
+from ..form import FormPlan, graph_mirror
 from ..stitch import Pieces, Rendered, StitchState, render
 from ..timing import SpeedRoom, beat_ease, ease_within, speed_room, within_room
 from .meta_graph import MetaMotionGraph
@@ -51,6 +57,9 @@ class MusicSegment:
     but not danced (a receding horizon: the segment is chosen knowing what follows it,
     where the music is known, as a file's is); ``remaining_beats`` counts from the end
     of the danced part.
+
+    ``form``: the song's form as heard when the segment was cut (``live.form``), over every beat
+    danced so far and this segment's; None: the engine's own plan (a file's, known in advance).
     """
 
     beat_times_s: np.ndarray
@@ -62,6 +71,7 @@ class MusicSegment:
     music_beat: np.ndarray | None = None
     beat_count: np.ndarray | None = None
     ahead: int = 0
+    form: FormPlan | None = None
 
 
 @dataclass(frozen=True)
@@ -93,12 +103,18 @@ class EngineConfig:
                                        # the tune split: 93 costs more accents, 98 left a song at 1.25x p99
     intensity_weight: float = 8.0     # eq. (8)'s intensity match against the stop, jump and repeat costs
                                       # beyond the paper (1 = the weight they were tuned at)
+    replay_reward: float = 40.0       # the song's form: arriving on a repeated section's beat at the node
+                                      # danced on its pair (engines/form.py); above repeat_penalty, which the
+                                      # first occurrence's nodes still carry
+    section_accent: float = 0.5       # ... and a section's first beat asks for this much more intensity (z)
+    entry_cost: float = 12.0          # ... and a replayed bar may start with a cut into its pair's node, blended,
+                                      # at this cost: the graph's own ways back to a move took ~20 beats
 
     @classmethod
     def paper(cls) -> "EngineConfig":
         """The objective of eq. (4)-(9) alone: no repeat penalty, no jump cost, no accent costs."""
         return cls(repeat_penalty=0.0, jump_cost=0.0, accent=None, bar_accent=0.0, downbeat_stop=0.0,
-                   ease_beats=0.0, ease_downbeat=0.0, intensity_weight=1.0)
+                   ease_beats=0.0, ease_downbeat=0.0, intensity_weight=1.0, replay_reward=0.0, section_accent=0.0)
 
     def beat_ease(self, n: int, bar_position, beats_per_bar) -> np.ndarray:
         """The accent timing of each of ``n`` beats (``timing.beat_ease``)."""
@@ -118,6 +134,12 @@ class StreamState:
     feet: FootLockState = field(default_factory=FootLockState)
     segments: int = 0
     motif_counts: np.ndarray | None = None  # (K,) motifs danced so far, when the engine has a signature
+    danced: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # the node of every beat so far
+
+    @property
+    def beat(self) -> int:
+        """The grid beat the next segment starts at (the last one danced)."""
+        return max(len(self.danced) - 1, 0)
 
 
 @dataclass(frozen=True)
@@ -191,6 +213,7 @@ class GraphEngine:
     config: EngineConfig = EngineConfig()
     fps: float = DEFAULT_FPS
     signature: SignatureTarget | None = None  # follow a genre's motif signature (signature.py)
+    form: FormPlan | None = None              # follow the song's form, on the beat grid danced (form.py)
 
     def initial_state(self, seed: int | None = None, needed_beats: float = np.inf) -> StreamState:
         """Fresh state. Without a seed the first segment may start at any clip's first beat
@@ -221,9 +244,12 @@ class GraphEngine:
             start = np.array([state.node])
         thc = np.inf if segment.remaining_beats is None else float(segment.remaining_beats - segment.ahead)
         seen = state.last_seen_s if state.last_seen_s is not None else np.full(self.graph.n_nodes, -np.inf)
+        plan = segment.form if segment.form is not None else self.form
+        targets, fresh, starts = self._form(state, len(beats), plan)
         penalty = None
-        if self.config.repeat_penalty > 0:
-            penalty = self.config.repeat_penalty * (beats[0] - seen <= self.config.repeat_window_s)
+        if self.config.repeat_penalty > 0:  # a new section remembers the whole dance
+            window = np.inf if fresh else self.config.repeat_window_s
+            penalty = self.config.repeat_penalty * (beats[0] - seen <= window)
         counts = state.motif_counts
         if self.signature is not None:
             counts = np.zeros(len(self.signature.template)) if counts is None else counts
@@ -234,11 +260,13 @@ class GraphEngine:
         bars = segment.bar_position
         target = standardise(inten, mean, std) + bar_shape(None if bars is None else bars[:-1],
                                                             segment.beats_per_bar, self.config.bar_accent)
+        target = target + self.config.section_accent * starts[:-1]
+
         def best(node_penalty):
             return search(self.graph, target, np.diff(beats), start_nodes=start,
                           prev_duration_s=state.prev_duration_s, thc=thc, node_penalty=node_penalty,
                           steps=self.steps, intensity_weight=self.config.intensity_weight,
-                          **self._beat_costs(bars, segment.music_beat))
+                          **self._beat_costs(bars, segment.music_beat), **self._targets(targets, state.beat, plan))
 
         path = best(penalty)
         # The memory knows the segments before this one; a path that comes back to its own beats (a loop
@@ -265,9 +293,10 @@ class GraphEngine:
         t2 = time.perf_counter()
         local, feet = self._lock_feet(frames, state.feet)
         t3 = time.perf_counter()
+        danced = np.r_[state.danced, path.nodes[1:]] if len(state.danced) else path.nodes.copy()
         new_state = replace(state, node=int(path.nodes[-1]), prev_duration_s=float(beats[-1] - beats[-2]),
                             n_heard=n, mean_db=mean, m2_db=m2, stitch=stitch, segments=state.segments + 1,
-                            last_seen_s=seen, feet=feet,
+                            last_seen_s=seen, feet=feet, danced=danced,
                             motif_counts=None if counts is None else self.signature.count(counts, path.nodes[1:]))
         return new_state, SegmentFrames.of(frames, local, path, pieces, t1 - t0, time.perf_counter() - t1,
                                            self.signature, foot_lock_s=t3 - t2)
@@ -284,12 +313,22 @@ class GraphEngine:
         t0 = time.perf_counter()
         # The same objective as streaming (jump cost included) but over the whole song;
         # the repeat penalty is a streaming memory and has no place in one global DP.
+        _, _, starts = self._form(state, len(beat_times_s), self.form)
         target = standardise(inten, inten.mean(), inten.std()) + bar_shape(
             None if bar_position is None else bar_position[:-1], beats_per_bar, self.config.bar_accent)
-        path = search(self.graph, target, np.diff(beat_times_s),
-                      start_nodes=state.start_nodes, thc=0.0, steps=self.steps,
-                      intensity_weight=self.config.intensity_weight,
-                      **self._beat_costs(bar_position, music_beat))
+        target = target + self.config.section_accent * starts[:-1]
+
+        def best(targets=None):
+            return search(self.graph, target, np.diff(beat_times_s),
+                          start_nodes=state.start_nodes, thc=0.0, steps=self.steps,
+                          intensity_weight=self.config.intensity_weight,
+                          **self._beat_costs(bar_position, music_beat), **self._targets(targets, 0, self.form))
+
+        path = best()
+        if self.form is not None and (self.form.source >= 0).any():
+            # The form's pairs point back into the path itself: search again, rewarded for keeping the
+            # first pass's nodes on the paired beats of both occurrences.
+            path = best(self.form.held(path.nodes, self.mirror))
         t1 = time.perf_counter()
         pieces = pieces_from_path(self.graph, path, np.asarray(beat_times_s, dtype=np.float64), beat_count,
                                   self.config.beat_ease(len(beat_times_s), bar_position, beats_per_bar),
@@ -301,6 +340,33 @@ class GraphEngine:
         t3 = time.perf_counter()
         return SegmentFrames.of(frames, local, path, pieces, t1 - t0, t3 - t1, self.signature,
                                 foot_lock_s=t3 - t2)
+
+    def _form(self, state: StreamState, n: int, plan: FormPlan | None) -> tuple[np.ndarray, bool, np.ndarray]:
+        """``plan``'s ask of the ``n`` beats from ``state.beat``: target nodes (-1: none), whether a new
+        section begins or goes on in them, and which are a section's first beat."""
+        if plan is None:
+            return np.full(n, -1, dtype=np.int64), False, np.zeros(n)
+        first = state.beat
+        part = slice(first, first + n)
+        starts = np.zeros(n)
+        starts[:len(plan.section_start[part])] = plan.section_start[part]
+        return (plan.targets(state.danced, first, n, self.mirror if plan.mirrored else None),
+                bool(plan.fresh[part].any()), starts)
+
+    def _targets(self, targets: np.ndarray | None, first: int, plan: FormPlan | None) -> dict:
+        """``search``'s form terms for beats ``first ..`` with these target nodes."""
+        if targets is None or plan is None or self.config.replay_reward <= 0 or not (targets >= 0).any():
+            return {}
+        entry = np.zeros(len(targets), bool)
+        part = plan.entry[first:first + len(targets)]
+        entry[:len(part)] = part
+        return {"beat_target": targets, "target_reward": self.config.replay_reward, "entry": entry,
+                "entry_cost": self.config.entry_cost}
+
+    @cached_property
+    def mirror(self) -> np.ndarray | None:
+        """Each node's mirror-image node, for ``--repeat mirror`` (None: the style has no mirrored takes)."""
+        return graph_mirror(self.style, self.graph)
 
     @cached_property
     def speed_room(self) -> SpeedRoom | None:

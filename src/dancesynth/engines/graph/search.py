@@ -62,7 +62,8 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
            node_penalty: np.ndarray | None = None, jump_cost: float = 0.0,
            accent: AccentCosts | None = None, beat_class: np.ndarray | None = None,
            class_cost: np.ndarray | None = None, steps: "StepCosts | None" = None,
-           intensity_weight: float = 1.0) -> Path:
+           intensity_weight: float = 1.0, beat_target: np.ndarray | None = None,
+           target_reward: float = 0.0, entry: np.ndarray | None = None, entry_cost: float = 0.0) -> Path:
     """Best path for K beat intervals (eq. 7-9).
 
     ``intensity_z`` (K,) are the normalised music intensities, ``durations_s`` (K,)
@@ -77,6 +78,11 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     ``steps``: the graph's ``StepCosts`` for this ``jump_cost`` and ``accent``, built once and
     reused across segments (built here when not given). ``intensity_weight`` scales eq. (8)'s
     intensity deviation against the costs added beyond the paper (1 = as printed).
+    ``beat_target`` (K+1,): a node to be at on beat k (-1: none), worth ``target_reward`` when the
+    path arrives there (the song's form: a repeated section replays its first occurrence's path).
+    On a beat where ``entry`` (K+1,) is set, the path may also cut into that beat's target from
+    wherever it is, for ``entry_cost`` (a jump along no edge of the graph: the render blends it),
+    so that a replay starts on its section's first beat however far the dance is from it.
 
     On a large graph only the steps leaving a node the path can be at (a finite cost) are
     relaxed: a streaming segment starts at one node, and within a segment's few beats the path
@@ -111,10 +117,15 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
                 row[steps.j_nodes] = np.minimum(row[steps.j_nodes], np.minimum.reduceat(arrive, steps.j_starts))
         else:
             np.minimum.at(row, steps.j_dst[j_sel], arrive)
+        cut = _entry(graph, costs[k], terms, k, beat_target, entry, entry_cost)
+        if cut is not None and cut[1] < row[cut[2]]:
+            row[cut[2]] = cut[1]
         if penalty is not None:
             row += penalty
         if beat_class is not None and beat_class[k + 1] >= 0:
             row += class_cost[beat_class[k + 1]]
+        if beat_target is not None and beat_target[k + 1] >= 0:
+            row[beat_target[k + 1]] -= target_reward
         if not terms.every_step:
             reached = np.flatnonzero(np.isfinite(row))
 
@@ -134,14 +145,31 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
         m_sel = steps.mono_into[v:v + 1] if steps.mono_into[v] >= 0 else np.zeros(0, dtype=np.int64)
         j_sel = np.arange(steps.j_first[v], steps.j_last[v])
         cand = np.concatenate([terms.mono(k, costs[k], m_sel), terms.jump(k, costs[k], j_sel)])
-        i = int(np.argmin(cand))
-        if i < len(m_sel):
+        i = int(np.argmin(cand)) if cand.size else -1
+        cut = _entry(graph, costs[k], terms, k, beat_target, entry, entry_cost)
+        if cut is not None and cut[2] == v and (i < 0 or cut[1] < cand[i]):
+            nodes[k], vias[k], jumped[k] = cut[0], graph.prev_node[v], True
+        elif i < len(m_sel):
             nodes[k] = vias[k] = steps.m_src[m_sel[i]]
             jumped[k] = False
         else:
             e = j_sel[i - len(m_sel)]
             nodes[k], vias[k], jumped[k] = steps.j_src[e], steps.j_via[e], True
     return Path(nodes, vias, jumped, float(costs[k_steps][end]))
+
+
+def _entry(graph: MetaMotionGraph, prev_cost: np.ndarray, terms: "BeatTerms", k: int, target, entry,
+           entry_cost: float) -> tuple[int, float, int] | None:
+    """The cut into beat ``k + 1``'s target, if allowed there: (from the cheapest node, at cost, into
+    the target) by the target's own mono edge in."""
+    if entry is None or not entry[k + 1] or target[k + 1] < 0:
+        return None
+    t = int(target[k + 1])
+    via = int(graph.prev_node[t])
+    src = int(np.argmin(prev_cost))
+    if via < 0 or not np.isfinite(prev_cost[src]):
+        return None
+    return src, float(prev_cost[src] + terms.deviation[k][via] + entry_cost), t
 
 
 class StepCosts:

@@ -32,6 +32,7 @@ from ...provenance import EngineRun
 from ...types import MotionClip, MusicFeatures
 from ..beatgrid import beat_grid, fit_style, fit_summary
 from ..footlock import FootLockState, lock_feet
+from ..form import form_plan, replay_motion
 from ..handclear import keep_hands_out_of_head
 from ..stitch import Rendered
 from .data import TRAIN_FPS, beat_phase, conditioning, decode_pose, hamming_weights, music_vectors, restore_spread
@@ -180,14 +181,24 @@ def neural_dance(music: MusicFeatures, db: MotionDatabase, config, *, timings: d
     grid = beat_grid(music, subdivide=subdivide)
     seed = 0 if config.seed is None else int(config.seed)
     motifs = motif_plan(grid.n_intervals, model.template, model.transitions, np.random.default_rng(seed))
+    # A returning section replays its motifs (the network makes its own motion of them).
+    form = form_plan(music, grid.times_s, config.repeat, config.vary)
+    held = form.held(motifs)
+    motifs = np.where(held >= 0, held, motifs)
     clip = generate(model, music, grid, motifs, fps=config.fps, seed=seed,
                     spread_cap=SPREAD_CAP if config.restore_spread else 1.0)
+    if (form.source >= 0).any():   # the network makes its motion afresh: a replay shows the frames it made
+        clip, frames = replay_motion(clip, grid.times_s, form)
+        roles = find_roles(clip.skeleton)
+        local, _ = lock_feet(clip.skeleton, roles, frames, FootLockState(), fps=config.fps)
+        clip = replace(clip, local_rot=keep_hands_out_of_head(clip.skeleton, roles, local, clip.root_pos,
+                                                              config.fps))
     timings["synthesis_s"] = time.perf_counter() - t
     # The generator makes its own motion (its warp rates are per frame): no beat pieces to count.
     run = EngineRun(style=style.name, genre=style.genre, style_fingerprint=style.fingerprint, subdivide=subdivide,
                     grid_times_s=grid.times_s, warp_rates=clip.meta["warp_rates"], step_s=(timings["synthesis_s"],),
                     motifs={"motif_plan": motifs}, fit=fit_summary(fit, music, None),
                     extra={"graph_cached": True, **model_id(model),
-                           "spread_cap": clip.meta["spread_cap"],
+                           "spread_cap": clip.meta["spread_cap"], "form": form.summary(motifs),
                            "realtime_factor": music.duration_s / max(timings["synthesis_s"], 1e-9)})
     return clip, run

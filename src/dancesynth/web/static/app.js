@@ -369,7 +369,10 @@ async function requestDance(event) {
 			style: result.style, joints: result.joints };
 		$('info').textContent = `${result.style} at ${result.tempo_bpm.toFixed(1)} bpm, ${result.beats.length} beats, ` +
 			`${result.duration_s.toFixed(1)} s · ${result.engine} engine · ${result.character}` +
-			(result.mesh ? '' : ' rig') + (result.default_tempo ? ' · no clear beat: a steady default tempo' : '');
+			(result.mesh ? '' : ' rig') + (result.default_tempo ? ' · no clear beat: a steady default tempo' : '') +
+			(result.form && result.form.length > 1 ? ' · form ' + result.form.map((s) => s.label).join(' ') +
+				' (' + result.form.filter((s) => s.replays !== null && s.replays !== undefined).length +
+				' sections danced again)' : '');
 		state.state = 'ready';
 		followPlayback();
 		audio.play().catch(() => {}); // browsers may refuse autoplay; the play button works
