@@ -325,10 +325,10 @@ def test_the_dance_stops_on_the_beats_far_above_chance_and_a_random_walk(vibe, b
     # against 0.78 / 0.83 before the mirrored takes, the repeat memory and the foot costs): the accent
     # timing does most of it. The search keeps up with it while following the loudness, which the walk
     # does not (Spearman 0.54 against -0.16), never replaying the last minute and sparing the feet.
-    # The walk knows no song form: the search is compared without it too. With it (the default) this
-    # song replays 20 of its 33 bars, and their first occurrence stops on fewer beats than the search
-    # alone does (F 0.74 against 0.84; on the tune split's songs of known form no loss: 3.03x chance
-    # against 2.98x, docs/form.md), hence the floors above rather than the walk.
+    # The walk knows no song form: the search is compared without it (the default). With --repeat same
+    # this song replays 20 of its 33 bars, and their first occurrence stops on fewer beats than the
+    # search alone does (F 0.74 against 0.84; on the tune split's songs of known form no loss: 3.03x
+    # chance against 2.98x, docs/form.md).
     from dancesynth.eval.evaluate import evaluate
 
     ours_clip = dance(vibe, database=bundled_db, repeat="off")
@@ -377,7 +377,7 @@ def test_the_dance_gets_livelier_where_the_music_gets_louder(vibe, bundled_db):
     ours = spearman(EngineConfig())
     assert ours >= 0.42
     assert ours > spearman(EngineConfig(intensity_weight=1.0, accent=AccentCosts())) + 0.1
-    # The song's form (the default) replays 20 of the 33 bars as first danced, loud or not: the dance
+    # The song's form (--repeat same) replays 20 of the 33 bars as first danced, loud or not: the dance
     # follows the loudness less (measured 0.32; on the tune split's songs of known form 0.60 -> 0.51).
     assert spearman(EngineConfig(), repeat="same") >= 0.25
 

@@ -36,11 +36,7 @@ def choreograph(music, db, config, model, **engine_options):
 
 @pytest.fixture(scope="module")
 def music(bundled_song):
-    # The mixer's own choices: without the song's form, whose replays count their motifs twice in the
-    # signature (tests/test_form.py dances the form with every engine).
-    from dataclasses import replace
-
-    return replace(analyse(bundled_song), structure=None)
+    return analyse(bundled_song)
 
 
 @pytest.fixture(scope="module")

@@ -199,3 +199,22 @@ def test_off_streams_without_the_matcher():
     form.push(_chord_song([0, 5, 0, 5, 0, 5, 0, 5]))
     form.add_beats(0.5 * np.arange(32), np.arange(32) % 4, 4)
     assert not (form.plan.source >= 0).any()
+
+
+@needs_fluidsynth
+def test_stream_and_dance_say_what_the_form_replayed(tmp_path):
+    from test_cli import run
+
+    from dancesynth.bench.groundtruth import render_song, structure_specs
+
+    spec = next(s for s in structure_specs("tune") if s.name == "form-aaba124_4-4")
+    song = render_song(spec, tmp_path)
+    proc = run("stream", song.audio_path, "-o", tmp_path / "live.bvh", "--fast", "-q", "--repeat", "same")
+    assert proc.returncode == 0, proc.stderr
+    line = next(ln for ln in proc.stdout.splitlines() if ln.startswith("form "))
+    assert "repeats bar" in line and "beats replayed" in line, line
+    proc = run("dance", song.audio_path, "-o", tmp_path / "d.bvh", "--repeat", "same")
+    line = next(ln for ln in proc.stdout.splitlines() if ln.startswith("form "))
+    assert "A:" in line and "bars replay an earlier one, 100% of their beats" in line, line
+    proc = run("dance", song.audio_path, "-o", tmp_path / "d.bvh")   # off by default: no form analysed
+    assert not any(ln.startswith("form ") for ln in proc.stdout.splitlines())

@@ -137,8 +137,8 @@ def test_dance_and_stream_follow_the_signature_from_the_command_line(tmp_path, b
     from dancesynth.io.bvh import read_bvh
 
     out = tmp_path / "dance.bvh"
-    # The song's form replays 20 of this minute's 33 bars, and the replays' motifs count twice
-    # (chi2 0.34 with it): the signature is followed where the dance chooses afresh.
+    # Without the song's form (the default; with --repeat same 20 of this minute's 33 bars replay, their
+    # motifs count twice, chi2 0.34): the signature is followed where the dance chooses afresh.
     proc = run("dance", bundled_song, "-o", out, "--follow-signature", "--repeat", "off")
     assert proc.returncode == 0, proc.stderr
     chi = float(proc.stdout.split("motifs    chi2 to the salsa template ")[1].split()[0])

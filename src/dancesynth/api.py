@@ -48,9 +48,10 @@ class DanceConfig:
                                         # False: each piece at one rate, on the same path (the bench compares)
     restore_spread: bool = True         # neural: widen the network's damped motion toward the mocap's spread
                                         # (engines/neural/data.restore_spread); False: the network alone
-    repeat: str = "same"                # the song's form (engines/form.py): a returning section replays its
+    repeat: str = "off"                 # the song's form (engines/form.py): a returning section replays its
                                         # moves ("same"), their mirror image ("mirror"), partly ("vary"), or
-                                        # is danced afresh ("off")
+                                        # is danced afresh ("off": the default while the form costs guards,
+                                        # docs/form.md)
     vary: float = 0.5                   # --repeat vary: the share of each repeat's bars danced anew
 
     def __post_init__(self):
@@ -160,10 +161,11 @@ def synthesise(engine: GraphEngine, grid: BeatGrid, duration_s: float, config: D
                  "boundaries_s": grid.times_s[[e for _, e in bounds[:-1]]]}
 
 
-def analyse(song, max_duration_s: float = MAX_SONG_S) -> MusicFeatures:
+def analyse(song, max_duration_s: float = MAX_SONG_S, structure: bool = True) -> MusicFeatures:
+    """``song``'s beats, metre and loudness, and with ``structure`` its form (``music.structure``)."""
     from .music import analyze_music  # librosa is heavy: import on first use
 
-    return analyze_music(path=song, fallback_bpm=FALLBACK_BPM, max_duration_s=max_duration_s, structure=True)
+    return analyze_music(path=song, fallback_bpm=FALLBACK_BPM, max_duration_s=max_duration_s, structure=structure)
 
 
 def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase | str | Path | None = None,
@@ -180,7 +182,8 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
         config = replace(config, **overrides)
     timings = {}
     t = time.perf_counter()
-    music = song if isinstance(song, MusicFeatures) else analyse(song, config.max_duration_s)
+    music = song if isinstance(song, MusicFeatures) else analyse(song, config.max_duration_s,
+                                                                 structure=config.repeat != "off")
     timings["music_s"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -227,8 +230,11 @@ def with_repetition(prov, db: MotionDatabase, music: MusicFeatures, fps: float, 
     if config is not None and len(prov.run.grid_times_s):
         grid = np.asarray(prov.run.grid_times_s)
         plan = form_plan(music, grid, config.repeat, config.vary)
-        at = np.clip(np.searchsorted(grid, music.beat_times_s - 1e-6), 0, len(grid) - 1)
-        asked = (plan.source[at] >= 0) & (np.abs(grid[at] - music.beat_times_s) < 1e-3)
+        # A music beat on a paired grid beat, or between two (a grid at half time), is the form's to replay.
+        t = np.asarray(music.beat_times_s)
+        at = np.clip(np.searchsorted(grid, t + 1e-6, side="right") - 1, 0, len(grid) - 2)
+        on = np.abs(grid[at] - t) < 1e-3
+        asked = (plan.source[at] >= 0) & (on | (plan.source[at + 1] >= 0))
     if asked is not None:
         sources = [{**s, "form_replay": bool(a)} for s, a in zip(sources, asked)]
     stats = repetition([(s["clip"], s["source_position"]) for s in sources], music.beat_times_s, asked=asked)

@@ -23,11 +23,12 @@ _OPTIONS = [
     click.option("--follow-signature", is_flag=True,
                  help="Streaming engine: also keep the genre's motif signature (Aristidou et al.'s global "
                       "structure)."),
-    click.option("--repeat", type=click.Choice(["same", "mirror", "vary", "off"]), default="same",
+    click.option("--repeat", type=click.Choice(["same", "mirror", "vary", "off"]), default="off",
                  show_default=True,
                  help="The song's form: a returning section or phrase replays the moves danced the first time "
                       "(same), their mirror image (mirror), its first bars with the rest new (vary, see --vary), "
-                      "or is danced afresh (off). Sections heard for the first time prefer new moves."),
+                      "or is danced afresh (off, the default until its costs are mended: docs/form.md). With same, "
+                      "mirror or vary, sections heard for the first time prefer new moves."),
     click.option("--vary", type=float, default=0.5, show_default=True, metavar="SHARE",
                  help="With --repeat vary: the share of each replayed phrase's bars danced anew (0 = same, 1 = new)."),
     click.option("--segment-seconds", type=float, default=SEGMENT_S, show_default=True,
@@ -65,7 +66,7 @@ def dance_options(command):
 
 
 def dance_config(*, style, engine, recreate, motif_at, follow_signature, segment_seconds, lookahead, fps, seed,
-                 max_minutes, ths, thr, paper, model, repeat="same", vary=0.5):
+                 max_minutes, ths, thr, paper, model, repeat="off", vary=0.5):
     """The ``DanceConfig`` the options of ``dance_options`` ask for."""
     from .api import DanceConfig
 

@@ -24,7 +24,7 @@ from .defaults import DEFAULT_FPS, SEGMENT_S
 @click.option("--database", type=click.Path(file_okay=False, path_type=Path),
               help="A database folder or a folder of BVH files (default: the bundled database).")
 @click.option("--follow-signature", is_flag=True, help="Also keep the genre's motif signature as the dance goes.")
-@click.option("--repeat", type=click.Choice(["same", "mirror", "vary", "off"]), default="same", show_default=True,
+@click.option("--repeat", type=click.Choice(["same", "mirror", "vary", "off"]), default="off", show_default=True,
               help="When the music repeats what was heard (two bars like two earlier ones), dance again what was "
                    "danced then: the same moves, their mirror image, its phrases' first bars (vary), or not (off).")
 @click.option("--vary", type=float, default=0.5, show_default=True, metavar="SHARE",

@@ -100,7 +100,7 @@ def _songs(cfg: BenchConfig, progress) -> list[dict]:
         root = cfg.groundtruth_dir or _default_cache()
         for song in ground_truth_set(root, quick=cfg.groundtruth_quick, specs=cfg.groundtruth_specs,
                                      split=cfg.groundtruth_split):
-            music = analyze_music(path=song.audio_path, structure=True)   # as dance analyses it
+            music = analyze_music(path=song.audio_path)
             y, sr = load_audio(song.audio_path, sr=22050, mono=True)
             out.append({"name": song.name, "set": "generated", "music": music, "beats": song.beats_s,
                         "loudness": beat_intensity_db(y, sr, song.beats_s), "beat_in_bar": song.beat_in_bar,

@@ -108,12 +108,11 @@ def _quick_form_specs():
 
 
 def load_song(name: str, max_s: float | None = None) -> MusicFeatures:
-    """Analyse a bundled song (by file name, or any path) as ``dance`` does, its form included, optionally
-    keeping its first ``max_s`` seconds."""
+    """Analyse a bundled song (by file name, or any path), optionally keeping its first ``max_s`` seconds."""
     from ..music import analyze_music
 
     path = Path(name) if Path(name).is_file() else MUSIC_DIR / name
-    music = analyze_music(path=path, structure=True)
+    music = analyze_music(path=path)
     return truncate_music(music, max_s) if max_s else music
 
 

@@ -180,7 +180,7 @@ def live_form(song: dict, db) -> dict:
     from ..live.sources import AudioSource
 
     with AudioSource(str(song["path"]), realtime=False) as src:
-        summary = run_live(src, lambda clip: None, config=LiveConfig(database=db), realtime=False)
+        summary = run_live(src, lambda clip: None, config=LiveConfig(database=db, repeat="same"), realtime=False)
     form, music = summary["form"], song["music"]
     bar_s = np.asarray(form["bar_starts_s"])
     live = bar_s[[b for b in form["section_bars"] if b < len(bar_s)]][1:]

@@ -46,7 +46,7 @@ class LiveConfig:
     first_audio_timeout_s: float = 20.0
     render: EngineConfig = field(default_factory=EngineConfig)
     follow_signature: bool = False     # keep the genre's motif signature (engines/graph/signature.py)
-    repeat: str = "same"               # the song's form, as heard (live/form.py): same, mirror, vary or off
+    repeat: str = "off"                # the song's form, as heard (live/form.py): same, mirror, vary or off
     vary: float = 0.5
 
     def __post_init__(self):

@@ -249,7 +249,7 @@ class GraphEngine:
         penalty = None
         if self.config.repeat_penalty > 0:  # a new section remembers the whole dance
             window = np.inf if fresh else self.config.repeat_window_s
-            penalty = self.config.repeat_penalty * (beats[0] - seen <= window)
+            penalty = self.config.repeat_penalty * (np.isfinite(seen) & (beats[0] - seen <= window))
         counts = state.motif_counts
         if self.signature is not None:
             counts = np.zeros(len(self.signature.template)) if counts is None else counts
