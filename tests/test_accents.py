@@ -327,7 +327,7 @@ def test_the_dance_stops_on_the_beats_far_above_chance_and_a_random_walk(vibe, b
     # does not (Spearman 0.54 against -0.16), never replaying the last minute and sparing the feet.
     # The walk knows no song form: the search is compared without it (the default). With --repeat same
     # this song replays 20 of its 33 bars, and their first occurrence stops on fewer beats than the
-    # search alone does (F 0.74 against 0.84; on the tune split's songs of known form no loss: 3.03x
+    # search alone does (F 0.71 against 0.84; on the tune split's songs of known form no loss: 3.08x
     # chance against 2.98x, docs/form.md).
     from dancesynth.eval.evaluate import evaluate
 
@@ -377,9 +377,9 @@ def test_the_dance_gets_livelier_where_the_music_gets_louder(vibe, bundled_db):
     ours = spearman(EngineConfig())
     assert ours >= 0.42
     assert ours > spearman(EngineConfig(intensity_weight=1.0, accent=AccentCosts())) + 0.1
-    # The song's form (--repeat same) replays 20 of the 33 bars as first danced, loud or not: the dance
-    # follows the loudness less (measured 0.32; on the tune split's songs of known form 0.60 -> 0.51).
-    assert spearman(EngineConfig(), repeat="same") >= 0.25
+    # The song's form (--repeat same) replays 20 of the 33 bars as first danced, loud or not (measured
+    # 0.49 here; on the tune split's songs of known form the loudness is followed less, 0.60 -> 0.51).
+    assert spearman(EngineConfig(), repeat="same") >= 0.35
 
 
 def test_looking_ahead_follows_the_loudness_closer_and_still_hits_the_beats(vibe, bundled_db):

@@ -58,6 +58,8 @@ class LiveForm:
 
     def push(self, samples: np.ndarray) -> None:
         """Audio as it arrives (at ``sr``, mono)."""
+        if self.mode == "off":
+            return
         self._audio = np.concatenate([self._audio, np.asarray(samples, np.float32)])
         self._heard += len(samples)
         drop = len(self._audio) - int(BUFFER_S * self.sr)
@@ -69,6 +71,11 @@ class LiveForm:
         """The beats given to the engine since the last call, in order, with their positions in the bar."""
         self._bpb = int(beats_per_bar)
         times = [float(t) for t in times]
+        if self.mode == "off":   # nothing to follow: the beats are only counted
+            self._times += times
+            self._source += [-1] * len(times)
+            self._entry += [False] * len(times)
+            return
         chroma, timbre = self._features(np.array(self._times[-1:] + times))   # the intervals they close
         i = 0
         for t, pos in zip(times, bar_positions):
