@@ -142,10 +142,15 @@ def test_a_returning_section_replays_its_moves_in_every_engine(tmp_path, bundled
         s_same = form_score(same, music.structure, music.beats_per_bar)
         s_off = form_score(off, music.structure, music.beats_per_bar)
         assert s_same["form_score"] > s_same["form_chance"] + 0.15 and s_same["form_score"] > s_off["form_score"]
+    # --repeat mirror: the second chorus is the first's mirror image (left and right swapped, x flipped).
+    mirror = dance(music, database=bundled_db, repeat="mirror")
+    assert "note" not in mirror.provenance.summary["form"]       # this style has mirrored takes
+    assert _chorus_difference(mirror, music, mirrored=True) < 0.5 * _chorus_difference(mirror, music)
 
 
-def _chorus_difference(clip, music) -> float:
-    """Mean body-shape distance between the first chorus and its return, beat by beat."""
+def _chorus_difference(clip, music, mirrored: bool = False) -> float:
+    """Mean body-shape distance between the first chorus and its return, beat by beat (``mirrored``: the
+    return's mirror image: left and right swapped, x flipped)."""
     secs = music.structure.sections
     first = next(s for s in secs if [t.label for t in secs].count(s.label) > 1)
     again = next(s for s in secs[secs.index(first) + 1:] if s.label == first.label)
@@ -154,7 +159,11 @@ def _chorus_difference(clip, music) -> float:
     b = np.searchsorted(music.beat_times_s, again.start_s - 1e-6)
     a = max(a, np.flatnonzero(music.beat_in_bar == 0)[first.first_bar])
     times_a, times_b = music.beat_times_s[a:a + n], music.beat_times_s[b:b + n]
-    return float(np.mean(np.linalg.norm(body_shapes(clip, times_a) - body_shapes(clip, times_b), axis=1)))
+    shape_a, shape_b = body_shapes(clip, times_a), body_shapes(clip, times_b)
+    if mirrored:   # body_shapes' points: head, then left and right of wrists, elbows, knees, ankles
+        shape_b = shape_b.reshape(n, -1, 3)[:, [0, 2, 1, 4, 3, 6, 5, 8, 7]] * [-1.0, 1.0, 1.0]
+        shape_b = shape_b.reshape(n, -1)
+    return float(np.mean(np.linalg.norm(shape_a - shape_b, axis=1)))
 
 
 def _chord_song(bars: list[int], sr: int = 22050, bar_s: float = 2.0) -> np.ndarray:
