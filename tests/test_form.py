@@ -227,3 +227,14 @@ def test_stream_and_dance_say_what_the_form_replayed(tmp_path):
     assert "A:" in line and "bars replay an earlier one, 100% of their beats" in line, line
     proc = run("dance", song.audio_path, "-o", tmp_path / "d.bvh")   # off by default: no form analysed
     assert not any(ln.startswith("form ") for ln in proc.stdout.splitlines())
+
+
+def test_a_pause_is_no_repeat_live():
+    from dancesynth.live.form import LiveForm
+
+    sr = 22050
+    form = LiveForm(sr)
+    audio = np.concatenate([_chord_song([0, 5, 7, 9]), np.zeros(8 * 2 * sr, np.float32)])   # 4 bars, then 8 silent
+    form.push(audio)
+    form.add_beats(0.5 * np.arange(48), np.arange(48) % 4, 4)
+    assert not form.repeats and not (form.plan.source >= 0).any()

@@ -30,6 +30,8 @@ BUFFER_S = 30.0        # audio kept for the beats' features (beats are given a f
 MAX_BARS = 256         # the bars compared (about 8 minutes at 120 bpm): memory and time stay bounded
 STAY = 0.5             # a replay goes on while each completed bar sounds at least this like its pair
 MIN_LAG_BARS = 2       # a repeat is at least this many bars back (a bar like the one before is no section)
+SILENT_DB = -60.0      # a bar this quiet (mean level) is a break: it ends a replay and starts none (two
+                       # silent bars sound alike, but a pause is no repeat)
 
 
 class LiveForm:
@@ -139,12 +141,14 @@ class LiveForm:
         offset = n_bars - min(n_bars, MAX_BARS)  # bar index of the similarity's first row
         sim = self._similarity()
         c = n_bars - 1 - offset
-        if self._offset is not None:
-            if c - self._offset < 0 or sim[c, c - self._offset] < STAY:
+        first = self._bar_first[-1]
+        silent = np.mean([t[-1] for t in self._timbre[first:first + self._bpb]] or [0.0]) * 10.0 < SILENT_DB
+        if self._offset is not None:             # (the timbre's last row is the level, dB / 10)
+            if silent or c - self._offset < 0 or sim[c, c - self._offset] < STAY:
                 self._offset = None
             else:
                 self._since += 1
-        if self._offset is None and c >= 1:
+        if self._offset is None and c >= 1 and not silent:
             lags = np.arange(MIN_LAG_BARS, c + 1)
             lags = lags[c - lags - 1 >= 0]
             if lags.size:
