@@ -17,7 +17,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import InputError
-from .files import read_user_file
+from .files import decode_text, read_user_file
 
 MAX_ASF_BYTES = 2_000_000        # CMU's are ~10 kB
 MAX_BONES = 500
@@ -253,11 +253,5 @@ def _num(tok: str, what: str, err, lineno) -> float:
 def read_text(path: Path, limit: int, what: str) -> str:
     """An ASF or AMC file's text, at most ``limit`` bytes; ``InputError`` for an empty or binary file."""
     data = read_user_file(path, limit=limit, what=f"{what} file {path}")
-    if not data.strip():
-        raise InputError(f"{path}: the file is empty")
-    if b"\x00" in data[:65536]:
-        raise InputError(f"{path}: not an {what} file (it looks binary); ASF and AMC are text")
-    try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        return data.decode("latin-1")
+    return decode_text(data, empty=f"{path}: the file is empty",
+                       binary=f"{path}: not an {what} file (it looks binary); ASF and AMC are text")

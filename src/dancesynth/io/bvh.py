@@ -42,6 +42,7 @@ import numpy as np
 from .. import rotations as rot
 from ..errors import InputError
 from ..types import POSITION_CHANNELS, ROTATION_CHANNELS, MotionClip, Skeleton
+from .files import decode_text
 from .bvh_writer import format_bvh, write_bvh
 from .skeleton_units import UNITS, detect_units, is_tpose_first_frame, resolve_units, standing_height
 
@@ -108,15 +109,9 @@ def parse_bvh(text: str, *, name: str = "<string>", to_metres: bool = True, unit
 
 
 def _decode(data: bytes, name: str) -> str:
-    if not data.strip():
-        raise InputError(f"{name}: the file is empty; a BVH file starts with a HIERARCHY section")
-    if b"\x00" in data[:65536]:
-        raise InputError(f"{name}: not a BVH file (it looks binary); BVH is a text format starting with HIERARCHY")
-    try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        # Old exporters write joint names in Latin-1; numbers and keywords are ASCII anyway.
-        return data.decode("latin-1")
+    return decode_text(data, empty=f"{name}: the file is empty; a BVH file starts with a HIERARCHY section",
+                       binary=f"{name}: not a BVH file (it looks binary); BVH is a text format starting with "
+                              "HIERARCHY")
 
 
 def _parse(text: str, name: str) -> _Raw:

@@ -39,6 +39,20 @@ def read_user_file(path, *, limit: int, what: str, prefix: int | None = None) ->
     return data
 
 
+def decode_text(data: bytes, *, empty: str, binary: str) -> str:
+    """A text file's bytes as text: ``InputError(empty)`` when blank, ``InputError(binary)`` when it holds
+    NUL bytes; UTF-8 (a BOM dropped), else Latin-1 (old exporters write names in it; numbers and
+    keywords are ASCII either way)."""
+    if not data.strip():
+        raise InputError(empty)
+    if b"\x00" in data[:65536]:
+        raise InputError(binary)
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return data.decode("latin-1")
+
+
 def _nonblocking(path, flags):
     # A FIFO opened for reading would block until a writer appears; O_NONBLOCK lets the check above see it.
     return os.open(path, flags | os.O_NONBLOCK)
