@@ -42,8 +42,8 @@ import numpy as np
 from .. import rotations as rot
 from ..errors import InputError
 from ..types import POSITION_CHANNELS, ROTATION_CHANNELS, MotionClip, Skeleton
-from .files import decode_text
 from .bvh_writer import format_bvh, write_bvh
+from .files import decode_text
 from .skeleton_units import UNITS, detect_units, is_tpose_first_frame, resolve_units, standing_height
 
 __all__ = ["UNITS", "read_bvh", "parse_bvh", "write_bvh", "format_bvh", "detect_units", "standing_height",

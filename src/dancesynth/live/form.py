@@ -25,6 +25,7 @@ import numpy as np
 from ..engines.form import PHRASE_BARS, FormPlan, check_repeat
 from ..music.structure import (KERNEL_BARS, MIN_SECTION_BARS, SAME_SECTION, bar_similarity, beat_features,
                                boundaries, novelty)
+from .ring import Ring
 
 BUFFER_S = 30.0        # audio kept for the beats' features (beats are given a few seconds late)
 MAX_BARS = 256         # the bars compared (about 8 minutes at 120 bpm): memory and time stay bounded
@@ -41,9 +42,7 @@ class LiveForm:
         check_repeat(mode, vary)
         self.sr, self.mode = int(sr), mode
         self.new_from = int(round(PHRASE_BARS * (1.0 - vary))) if mode == "vary" else PHRASE_BARS
-        self._audio = np.zeros(0, np.float32)
-        self._audio_start = 0                   # global sample of _audio[0]
-        self._heard = 0
+        self._audio = Ring(int(BUFFER_S * self.sr))   # the last BUFFER_S of audio, by global sample
         self._times: list[float] = []
         self._chroma: list[np.ndarray] = []      # per beat interval (beat k to k + 1)
         self._timbre: list[np.ndarray] = []
@@ -62,12 +61,9 @@ class LiveForm:
         """Audio as it arrives (at ``sr``, mono)."""
         if self.mode == "off":
             return
-        self._audio = np.concatenate([self._audio, np.asarray(samples, np.float32)])
-        self._heard += len(samples)
-        drop = len(self._audio) - int(BUFFER_S * self.sr)
-        if drop > 0:
-            self._audio = self._audio[drop:]
-            self._audio_start += drop
+        samples = np.asarray(samples, np.float32)
+        for i in range(0, len(samples), self._audio.keep):   # a long stall's silence, a piece at a time
+            self._audio.append(samples[i:i + self._audio.keep])
 
     def add_beats(self, times, bar_positions, beats_per_bar: int) -> None:
         """The beats given to the engine since the last call, in order, with their positions in the bar."""
@@ -118,11 +114,13 @@ class LiveForm:
     def _features(self, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The chroma and timbre of each interval between ``edges`` (zeros where its audio is gone)."""
         n = max(len(edges) - 1, 0)
-        a = int(round(edges[0] * self.sr)) - self._audio_start if n else 0
-        b = int(round(edges[-1] * self.sr)) - self._audio_start if n else 0
-        if not n or a < 0 or b > len(self._audio) or b - a < 512:
+        audio = self._audio.view()[-self._audio.keep:]     # the ring holds up to twice that
+        start = self._audio.end - len(audio)
+        a = int(round(edges[0] * self.sr)) - start if n else 0
+        b = int(round(edges[-1] * self.sr)) - start if n else 0
+        if not n or a < 0 or b > len(audio) or b - a < 512:
             return np.zeros((n, 12)), np.zeros((n, 14))
-        return beat_features(self._audio[a:b], self.sr, edges[:-1] - edges[0])
+        return beat_features(audio[a:b], self.sr, edges[:-1] - edges[0])
 
     def _similarity(self, ordered: bool = True) -> np.ndarray:
         """``bar_similarity`` of the complete bars heard (the last ``MAX_BARS``)."""
