@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kinematics import clip_fk
+from ..kinematics import fk
 from ..motion.roles import find_roles
 from ..types import MotionClip, SongStructure
 
@@ -30,8 +30,9 @@ def body_shapes(clip: MotionClip, times_s: np.ndarray) -> np.ndarray:
     roles = find_roles(clip.skeleton)
     joints = [j for j in (roles.head, *roles.wrists, *roles.elbows, *roles.knees, *roles.ankles) if j >= 0]
     frames = np.clip(np.rint(np.asarray(times_s) * clip.fps).astype(np.int64), 0, clip.n_frames - 1)
-    _, pos = clip_fk(clip)
-    pos = pos[frames]
+    sk = clip.skeleton
+    _, pos = fk(clip.local_rot[frames], clip.root_pos[frames], sk.offsets, sk.parents,
+                None if clip.local_pos is None else clip.local_pos[frames])   # the sampled frames only
     root = pos[:, roles.root]
     across = pos[:, roles.hips[0]] - pos[:, roles.hips[1]]
     yaw = np.arctan2(across[:, 2], across[:, 0])       # the hips' line, turned onto +x (Y up)
