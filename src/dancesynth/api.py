@@ -212,14 +212,14 @@ def dance(song, *, config: DanceConfig | None = None, database: MotionDatabase |
     prov = make_provenance(config.engine, name, config, run, fps=config.fps, frames=clip.n_frames, timings=timings,
                            music=music, segment_s=segment_s)
     prov = prov.with_summary(**metre_summary(clip, music, run.style, prov.summary.get("warnings", [])))
-    clip.provenance = with_repetition(prov, db, music, config.fps, config)
+    clip.provenance = with_repetition(prov, db, music, config.fps)
     return clip
 
 
-def with_repetition(prov, db: MotionDatabase, music: MusicFeatures, fps: float, config: DanceConfig | None = None):
+def with_repetition(prov, db: MotionDatabase, music: MusicFeatures, fps: float):
     """``prov`` with the clip and frame danced on every music beat, and the summary's account of how
     much of the dance replays material danced in the previous minute (``eval.repetition``), the
-    replays the song's form asked for (``config.repeat``) aside."""
+    replays the song's form asked for (the engine's ``EngineRun.form``) aside."""
     from .eval.repetition import beat_sources, repetition
 
     style = db.styles.get(prov.style)
@@ -227,15 +227,8 @@ def with_repetition(prov, db: MotionDatabase, music: MusicFeatures, fps: float, 
         return prov
     sources = beat_sources(prov.source_frames, fps, music.beat_times_s, style.material)
     asked = None
-    if config is not None and len(prov.run.grid_times_s):
-        grid = np.asarray(prov.run.grid_times_s)
-        plan = form_plan(music, grid, config.repeat, config.vary)
-        # A music beat on a paired grid beat, or between two (a grid at half time), is the form's to replay.
-        t = np.asarray(music.beat_times_s)
-        at = np.clip(np.searchsorted(grid, t + 1e-6, side="right") - 1, 0, len(grid) - 2)
-        on = np.abs(grid[at] - t) < 1e-3
-        asked = (plan.source[at] >= 0) & (on | (plan.source[at + 1] >= 0))
-    if asked is not None:
+    if prov.run.form is not None and len(prov.run.grid_times_s) > 1:
+        asked = prov.run.form.asked_at(prov.run.grid_times_s, music.beat_times_s)
         sources = [{**s, "form_replay": bool(a)} for s, a in zip(sources, asked)]
     stats = repetition([(s["clip"], s["source_position"]) for s in sources], music.beat_times_s, asked=asked)
     stats["material_minutes"] = style.captured_s / 60.0
@@ -368,7 +361,7 @@ def _graph_dance_fit(fit: StyleFit, music: MusicFeatures, db: MotionDatabase, co
     extra = {"lookahead_s": config.lookahead_s, "graph_nodes": graph.n_nodes,
              "graph_mean_in_degree": graph.mean_in_degree, "graph_cached": cached,
              "form": form.summary(np.concatenate([segments[0].path.nodes[:1]] + [s.path.nodes[1:] for s in segments]),
-                                  engine.mirror)}
+                                  engine.mirror if form.mirrored else None)}
     motifs = {}
     if signature is not None:
         from .motion.motifs import chi2
@@ -383,7 +376,7 @@ def _graph_dance_fit(fit: StyleFit, music: MusicFeatures, db: MotionDatabase, co
                     grid_times_s=grid.times_s, transition_times_s=jumps, warp_rates=warp_rates,
                     segment_times_s=stats["boundaries_s"], step_s=tuple(stats["step_s"]),
                     source_frames=np.concatenate([s.source_pos for s in segments]), motifs=motifs,
-                    fit=fit_summary(fit, music, warp_rates), extra=extra)
+                    fit=fit_summary(fit, music, warp_rates), extra=extra, form=form)
     return MotionClip(style.skeleton, config.fps, root, local, contacts=contacts), run
 
 

@@ -41,6 +41,7 @@ class EngineRun:
     motifs: dict = field(default_factory=dict)  # motif ids, plan and constraints (Aristidou et al.)
     fit: dict = field(default_factory=dict)     # engines.beatgrid.fit_summary: level, warp, warnings
     extra: dict = field(default_factory=dict)   # the engine's own numbers (graph size, model, ...)
+    form: object = None                         # the engines.form.FormPlan it followed, on grid_times_s
 
 
 @dataclass(frozen=True)

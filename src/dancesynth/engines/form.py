@@ -74,6 +74,14 @@ class FormPlan:
             out[hit] = mirror[out[hit]]
         return out
 
+    def asked_at(self, grid_times_s: np.ndarray, times_s: np.ndarray) -> np.ndarray:
+        """(T,) bool: which of ``times_s`` (e.g. the music's beats) the plan asks to replay: on a paired grid
+        beat, or between two (a grid at half time)."""
+        grid, t = np.asarray(grid_times_s), np.asarray(times_s)
+        at = np.clip(np.searchsorted(grid, t + 1e-6, side="right") - 1, 0, len(grid) - 2)
+        on = np.abs(grid[at] - t) < 1e-3
+        return (self.source[at] >= 0) & (on | (self.source[at + 1] >= 0))
+
     def held(self, danced: np.ndarray, mirror: np.ndarray | None = None) -> np.ndarray:
         """For a second search over the whole song: the value to hold on every beat a pair ties (the first
         search's ``danced`` on the first occurrence, its replay on the repeat), -1 elsewhere."""

@@ -151,6 +151,6 @@ def choreography_dance(music: MusicFeatures, db: MotionDatabase, config, *, timi
     run = EngineRun(style=style.name, genre=style.genre, style_fingerprint=style.fingerprint, subdivide=subdivide,
                     grid_times_s=grid.times_s, transition_times_s=jumps, warp_rates=warp_rates,
                     step_s=(timings["synthesis_s"],), source_frames=result.source_frames, motifs=motifs,
-                    fit=fit_summary(fit, music, warp_rates), extra=extra)
+                    fit=fit_summary(fit, music, warp_rates), extra=extra, form=form)
     clip = MotionClip(style.skeleton, config.fps, result.root_pos, result.local_rot, contacts=result.contacts)
     return clip, run

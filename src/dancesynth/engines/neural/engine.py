@@ -197,7 +197,7 @@ def neural_dance(music: MusicFeatures, db: MotionDatabase, config, *, timings: d
     # The generator makes its own motion (its warp rates are per frame): no beat pieces to count.
     run = EngineRun(style=style.name, genre=style.genre, style_fingerprint=style.fingerprint, subdivide=subdivide,
                     grid_times_s=grid.times_s, warp_rates=clip.meta["warp_rates"], step_s=(timings["synthesis_s"],),
-                    motifs={"motif_plan": motifs}, fit=fit_summary(fit, music, None),
+                    motifs={"motif_plan": motifs}, fit=fit_summary(fit, music, None), form=form,
                     extra={"graph_cached": True, **model_id(model),
                            "spread_cap": clip.meta["spread_cap"], "form": form.summary(motifs),
                            "realtime_factor": music.duration_s / max(timings["synthesis_s"], 1e-9)})
