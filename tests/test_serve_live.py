@@ -1,0 +1,156 @@
+"""`dancesynth serve`'s live dances: /ws/live streams audio, the hierarchy, frames and beats over WebSocket
+(the rest of the web API: test_serve.py)."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+
+import numpy as np
+import pytest
+import soundfile as sf
+
+from serve_support import TRUMPET, music_http, request, server  # noqa: F401 (fixtures)
+
+
+def live_messages(server, query: str, timeout_s: float = 40.0):
+    """Every message of one /ws/live session: (JSON messages, audio bytes received)."""
+    from websockets.sync.client import connect
+
+    messages, audio = [], 0
+    deadline = time.monotonic() + timeout_s
+    with connect(f"ws://{server[0]}:{server[1]}/ws/live?{query}", open_timeout=10, max_size=None) as ws:
+        while time.monotonic() < deadline:
+            try:
+                m = ws.recv(timeout=max(0.1, deadline - time.monotonic()))
+            except TimeoutError:
+                break
+            except Exception:  # the server closed the connection
+                break
+            if isinstance(m, bytes):
+                audio += len(m)
+                continue
+            messages.append(json.loads(m))
+            if messages[-1]["type"] in ("end", "error"):
+                break
+    return messages, audio
+
+
+def test_live_streams_audio_hierarchy_frames_and_beats(server, music_http):
+    """One viewer on the default character (the mannequin) and, at the same time, one of the same stream
+    on another: two broadcasts, each on its character's rig."""
+    from urllib.parse import urlencode
+
+    from dancesynth.io.bvh import parse_bvh
+    from dancesynth.retarget.rigs import rig_skeleton
+
+    url = f"{music_http}/{TRUMPET.name}"
+    t0 = time.monotonic()
+    on_cmu = {}
+    other = threading.Thread(target=lambda: on_cmu.update(
+        zip(("messages", "audio"), live_messages(server, urlencode({"url": url, "segment_s": 2, "character": "cmu"})))))
+    other.start()
+    streams = []
+
+    def poll_streams():
+        while other.is_alive():
+            streams.append(json.loads(request(server, "GET", "/api/live")[2])["streams"])
+            time.sleep(0.5)
+
+    poller = threading.Thread(target=poll_streams)
+    poller.start()
+    try:
+        messages, audio = live_messages(server, urlencode({"url": url, "segment_s": 2}))
+    finally:
+        other.join(timeout=60)
+        poller.join(timeout=10)
+    kinds = [m["type"] for m in messages]
+    assert kinds[0] == "start" and kinds[-1] == "end", messages[-1]
+    assert kinds.count("hierarchy") == 1 and kinds.index("hierarchy") < kinds.index("frames")
+    duration = sf.info(TRUMPET).duration
+    assert time.monotonic() - t0 > 0.8 * duration, "a stream plays at its own pace"
+    assert audio == pytest.approx(duration * 22050 * 2, rel=0.02)
+    frames = [m for m in messages if m["type"] == "frames"]
+    assert len(frames) >= 2
+    assert [f["start_frame"] for f in frames] == list(np.cumsum([0] + [len(f["rows"]) for f in frames[:-1]]))
+    hierarchy = next(m for m in messages if m["type"] == "hierarchy")
+    rows = [r for f in frames for r in f["rows"]]
+    text = "\n".join([hierarchy["bvh"], "MOTION", f"Frames: {len(rows)}", "Frame Time: 0.03333333", *rows])
+    clip = parse_bvh(text)
+    assert clip.n_frames == len(rows) == messages[-1]["summary"]["frames"]
+    assert abs(clip.n_frames / 30 - duration) < 0.5
+    beats = [t for m in messages if m["type"] == "beats" for t in m["beats"]]
+    assert len(beats) >= 3 and np.all(np.diff(beats) > 0)
+    # Retargeted onto the mannequin: its rig in the header (the joints the page's GLB has), standing on the floor.
+    assert messages[0]["character"] == "mannequin"
+    assert sorted(clip.skeleton.names) == sorted(rig_skeleton("mannequin")[0].names)
+    assert 0.7 < clip.root_pos[:, 1].mean() < 1.1, "the hips are not at the mannequin's height"
+    # The other viewer chose cmu: its own broadcast, on the cmu rig, beside the mannequin's.
+    others = on_cmu["messages"]
+    assert others[0]["character"] == "cmu" and others[-1]["type"] == "end", others[-1]
+    cmu = next(m for m in others if m["type"] == "hierarchy")["bvh"]
+    assert "LHipJoint" in cmu and "LHipJoint" not in hierarchy["bvh"]
+    assert any(sorted((s["character"], s["viewers"]) for s in seen) == [("cmu", 1), ("mannequin", 1)]
+               for seen in streams), streams
+
+
+def test_a_client_that_leaves_mid_stream_stops_the_live_dance(server, music_http):
+    from urllib.parse import urlencode
+
+    from websockets.sync.client import connect
+
+    query = urlencode({"url": f"{music_http}/Kevin_MacLeod_-_Vibe_Ace.ogg", "segment_s": 2})
+    with connect(f"ws://{server[0]}:{server[1]}/ws/live?{query}", open_timeout=10, max_size=None) as ws:
+        assert json.loads(ws.recv(timeout=10))["type"] == "start"
+        for _ in range(5):
+            ws.recv(timeout=10)  # some audio
+    deadline = time.monotonic() + 20
+    while any(t.name == "dancesynth-live" for t in threading.enumerate()) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(t.name == "dancesynth-live" for t in threading.enumerate()), "the live thread kept running"
+    status, _, _ = request(server, "GET", "/api/songs")
+    assert status == 200
+
+
+@pytest.mark.parametrize("query, words", [
+    ("url=/etc/passwd", "http"), ("url=-", "http"), ("", "http"),
+    ("url=http://127.0.0.1:9/x.ogg&segment_s=abc", "segment_s"),
+    ("url=http://127.0.0.1:9/nothing.ogg", "no audio"),
+    ("url=http://127.0.0.1:9/x.ogg&character=robot", "unknown character 'robot'; pick one of mannequin"),
+    ("url=http://127.0.0.1:9/x.ogg&character=/etc/passwd", "unknown character"),
+    ("url=http://127.0.0.1:9/x.ogg&character=tests%2Fdata%2Fa.bvh", "unknown character"),
+])
+def test_live_refuses_bad_streams_with_a_message(server, query, words):
+    messages, _ = live_messages(server, query, timeout_s=30)
+    assert messages[-1]["type"] == "error", messages
+    assert words in messages[-1]["error"]
+
+
+def test_live_audio_is_relayed_in_pieces_and_nothing_is_held_back():
+    """The stream's ~20 ms reads go to the viewers in pieces of at least RELAY_S (fewer sends for 50 viewers);
+    a read that finds nothing (a stall) and the end hand on what is held, so no audio waits or is lost."""
+    from types import SimpleNamespace
+
+    from dancesynth.web.live import RELAY_S, _RelaySource
+
+    sr = 22050
+    reads = [np.full(441, 0.5, np.float32)] * 7 + [None] + [np.full(441, -0.25, np.float32)] * 3
+
+    class Source:
+        sr, spec, error = 22050, "test", ""
+
+        def read(self, timeout):
+            if not reads:
+                raise StopIteration
+            samples = reads.pop(0)
+            return None if samples is None else SimpleNamespace(samples=samples)
+
+    sent = []
+    relay = _RelaySource(Source(), sent.append, int(RELAY_S * sr))
+    with pytest.raises(StopIteration):
+        while True:
+            relay.read(0.05)
+    pieces = [np.frombuffer(b, "<i2") for b in sent]
+    assert [len(x) for x in pieces] == [2205, 882, 1323]  # 5 reads; the 2 before the stall; the 3 before the end
+    assert np.all(pieces[0] == 16383) and np.all(pieces[2] == -8191)
