@@ -6,6 +6,7 @@ from __future__ import annotations
 import http.client
 import json
 import subprocess
+import time
 import uuid
 from pathlib import Path
 
@@ -78,3 +79,26 @@ def assert_video_with_song(path: Path):
     assert float(probe["format"]["duration"]) == pytest.approx(sf.info(TRUMPET).duration, abs=0.3)
     video = next(s for s in probe["streams"] if s["codec_type"] == "video")
     assert (video["width"], video["height"]) == VIDEO_SIZE
+
+
+def live_messages(server, query: str, timeout_s: float = 40.0):
+    """Every message of one /ws/live session: (JSON messages, audio bytes received)."""
+    from websockets.sync.client import connect
+
+    messages, audio = [], 0
+    deadline = time.monotonic() + timeout_s
+    with connect(f"ws://{server[0]}:{server[1]}/ws/live?{query}", open_timeout=10, max_size=None) as ws:
+        while time.monotonic() < deadline:
+            try:
+                m = ws.recv(timeout=max(0.1, deadline - time.monotonic()))
+            except TimeoutError:
+                break
+            except Exception:  # the server closed the connection
+                break
+            if isinstance(m, bytes):
+                audio += len(m)
+                continue
+            messages.append(json.loads(m))
+            if messages[-1]["type"] in ("end", "error"):
+                break
+    return messages, audio

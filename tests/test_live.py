@@ -375,7 +375,7 @@ def test_every_viewer_of_a_source_that_dies_is_told(tmp_path):
     from urllib.parse import urlencode
 
     from servers import uvicorn_server
-    from test_serve import live_messages
+    from serve_support import live_messages
     from dancesynth.web.server import create_app
 
     mp3 = _excerpt(tmp_path, "mp3", 5.0).read_bytes()

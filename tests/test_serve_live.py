@@ -11,30 +11,7 @@ import numpy as np
 import pytest
 import soundfile as sf
 
-from serve_support import TRUMPET, music_http, request, server  # noqa: F401 (fixtures)
-
-
-def live_messages(server, query: str, timeout_s: float = 40.0):
-    """Every message of one /ws/live session: (JSON messages, audio bytes received)."""
-    from websockets.sync.client import connect
-
-    messages, audio = [], 0
-    deadline = time.monotonic() + timeout_s
-    with connect(f"ws://{server[0]}:{server[1]}/ws/live?{query}", open_timeout=10, max_size=None) as ws:
-        while time.monotonic() < deadline:
-            try:
-                m = ws.recv(timeout=max(0.1, deadline - time.monotonic()))
-            except TimeoutError:
-                break
-            except Exception:  # the server closed the connection
-                break
-            if isinstance(m, bytes):
-                audio += len(m)
-                continue
-            messages.append(json.loads(m))
-            if messages[-1]["type"] in ("end", "error"):
-                break
-    return messages, audio
+from serve_support import TRUMPET, live_messages, music_http, request, server  # noqa: F401 (fixtures)
 
 
 def test_live_streams_audio_hierarchy_frames_and_beats(server, music_http):
