@@ -105,11 +105,13 @@ def test_quality_table_has_every_metric_for_every_dance(bench):
 
 def test_our_dance_follows_the_music_intensity_better_than_a_random_walk(bench):
     """The user-visible claim: the search, not the graph alone, makes the dance follow the loudness (on the
-    Hungarian Dance measured 0.36 streaming, 0.59 global, 0.20 for this walk and 0.04-0.11 for walks of other
-    seeds; streaming gives some of it up to spare the feet and not to replay the last minute)."""
+    Hungarian Dance measured 0.51 streaming, 0.49 global, 0.20 for this walk and 0.04-0.11 for walks of other
+    seeds). Its loud passages are its fast ones, where the pieces matched as shown at the song's tempo are
+    calmer ones played faster: 0.36 / 0.58 when the search matched each piece's rank among the style's
+    (eq. 5's w1_z; over the five bundled songs 0.43 / 0.69 then, 0.45 / 0.72 now)."""
     mean = bench[0]["quality"]["mean"]
-    assert mean["streaming"]["intensity_spearman"] > mean["random_walk"]["intensity_spearman"] + 0.12
-    assert mean["global"]["intensity_spearman"] > mean["random_walk"]["intensity_spearman"] + 0.3
+    for engine in ("streaming", "global"):
+        assert mean[engine]["intensity_spearman"] > mean["random_walk"]["intensity_spearman"] + 0.2, engine
 
 
 def test_the_random_walk_still_dances_on_the_beat(bench, bundled_db):
@@ -224,6 +226,30 @@ def test_accents_score_every_engine_beside_chance_a_random_walk_and_the_mocap(be
     assert sorted(x["beats_per_bar"] for x in s["songs"] if x["set"] == "generated") == [3, 4]
     assert s["summary"]["generated"]["streaming"]["waltz_period_3"] in (0.0, 1.0)
     assert s["summary"]["mocap"]["accent_recall"] is not None
+    # The speed guard, song by song, each dance beside its style's own range over as long a stretch.
+    for engine, g in s["speed_guard"].items():
+        assert g["dances"] == sum(engine in x["scores"] for x in s["songs"])
+        assert 0 <= g["outside_mocap_range"] <= g["outside"] <= g["dances"]
+    for x in s["songs"]:
+        for lo, hi in x["speed_range"].values():
+            assert 0 < lo <= hi
+    assert "p99 joint speed outside ±25 %" in format_bench(bench[0])
+
+
+def test_the_mocaps_own_speed_range_narrows_as_its_stretches_lengthen(bundled_db):
+    """A stretch of mocap strays from the whole capture's p99 joint speed the more the shorter it is: 5 s of
+    salsa-97-124bpm span 0.61-1.51x (measured), 90 s stay within the guard's +-25 %."""
+    from dancesynth.bench.accents import mocap_speed_range
+    from dancesynth.bench.quality import at_fps
+    from dancesynth.eval.evaluate import mocap_reference
+
+    style = bundled_db.styles["salsa-97-124bpm"]
+    clips = [at_fps(style.clip(c), 30.0) for c in range(style.n_clips)]
+    whole = mocap_reference(clips, 30.0).joint_speed_p99_m_s
+    short, long_ = (mocap_speed_range(clips, whole, d) for d in (5.0, 90.0))
+    assert short[0] < 0.75 and short[1] > 1.25
+    assert short[0] < long_[0] <= 1.0 <= long_[1] < short[1] and 0.75 < long_[0] and long_[1] < 1.25
+    assert mocap_speed_range(clips, whole, 1e5) == [1.0, 1.0]   # longer than the capture: no stretch to compare
 
 
 def test_form_scores_each_engine_with_and_without_the_song_form(bench):

@@ -72,8 +72,10 @@ def test_following_the_signature_brings_the_dance_closer_to_the_genre(dances, so
         ids = d.provenance.motifs["motif_ids"]
         assert len(ids) == len(d.provenance.grid_times_s) - 1 and np.all(ids >= 0)
         assert d.provenance.summary["motif_chi2"] == pytest.approx(chi2(template, np.bincount(ids, minlength=48)))
-    # Measured: 0.24 without the term, 0.08-0.09 with it (weight 1.0).
-    assert np.mean(followed) < 0.7 * np.mean(plain), (plain, followed)
+    # Measured: 0.08-0.09 without the term, 0.03-0.08 with it (weight 1.0). (0.24 without it before the search
+    # matched the intensity each piece shows at the song's tempo: asked for the style's whole range of
+    # intensity at 112.5 bpm, the dance drew on the salsa moves the template has least of.)
+    assert np.mean(followed) < 0.8 * np.mean(plain), (plain, followed)
     assert max(followed) < 0.1, followed
 
 

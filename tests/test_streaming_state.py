@@ -57,16 +57,23 @@ def test_intensity_is_standardised_by_everything_heard_so_far(engine):
     # The loud segment is judged against the quiet one heard before it: it is loud, so the
     # search asks for the style's liveliest pieces there.
     seg2 = list(segments([quiet, loud]))[1]
-    state2, out = engine.step(state, seg2)
+    state2, _ = engine.step(state, seg2)
     heard = np.r_[quiet, loud]
     assert state2.n_heard == 20
     assert state2.mean_db == pytest.approx(heard.mean())
     assert np.sqrt(state2.m2_db / state2.n_heard) == pytest.approx(heard.std())
-    # The same loud music after a loud start is ordinary there: the dance is calmer than after quiet.
-    after_loud, _ = engine.step(engine.initial_state(seed=0), next(segments([loud, loud])))
-    _, same = engine.step(after_loud, list(segments([loud, loud]))[1])
-    w1 = engine.graph.w1_z
-    assert np.mean(w1[out.path.nodes[:-1]]) > np.mean(w1[same.path.nodes[:-1]]) + 0.15
+    # The same loud music after a loud start is ordinary there: the dance is calmer than after quiet, by
+    # the intensity its pieces show (measured 0.29 z on average; from one start the few beats reachable in
+    # a segment may leave both on one path: 0.0 from seed 0, 0.48 from seed 1).
+    shown = engine.graph.shown_intensity_z(np.diff(seg2.beat_times_s))[0]
+    calmer = []
+    for seed in range(6):
+        after_quiet, _ = engine.step(engine.initial_state(seed=seed), next(segments([quiet, loud])))
+        _, lively = engine.step(after_quiet, seg2)
+        after_loud, _ = engine.step(engine.initial_state(seed=seed), next(segments([loud, loud])))
+        _, same = engine.step(after_loud, list(segments([loud, loud]))[1])
+        calmer.append(np.mean(shown[lively.path.nodes[:-1]]) - np.mean(shown[same.path.nodes[:-1]]))
+    assert np.mean(calmer) > 0.15 and min(calmer) >= 0, calmer
     # Looked-ahead intervals are searched, not heard: they do not enter the statistics.
     ahead = MusicSegment(seg2.beat_times_s, seg2.intensity_db, ahead=4)
     assert engine.step(state, ahead)[0].n_heard == 16

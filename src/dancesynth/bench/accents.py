@@ -18,6 +18,11 @@ mocap's median accent does (``stop_depth_on_beats``; ``EvalParams.visible_stop_d
 engine with accent timing dances each song again without it, in the same style and on the same path
 (``same_path`` checks), so the table shows what the easing adds to what the chosen pieces give.
 
+The joint-speed guard (p99 within ±25 % of the style's mocap) is also checked song by song, beside
+the range the style's own mocap spans over stretches as long as the song (``mocap_speed_range``):
+over 5 s a stretch of salsa mocap lies outside ±25 % of its whole p99 four times in ten, over 90 s
+almost never, so a short song's dance is judged against what the capture itself does at that length.
+
 The raw mocap row scores each clip of the styles danced against its own motion
 beats (it has no music); the paper row is the streaming engine with Xu et al.'s objective and
 graph as printed (``--paper``); the lookahead row is the streaming engine with ``--lookahead 5``
@@ -161,12 +166,12 @@ def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
     from ..eval.evaluate import mocap_reference
 
     songs = _songs(cfg, progress)
-    clips_by_style, refs, sources = {}, {}, {}
+    clips_by_style, refs, sources, speed_ranges = {}, {}, {}, {}
     per_song = []
     for i, song in enumerate(songs):
         if progress:
             progress(f"accents: song {i + 1}/{len(songs)}: {song['name']}")
-        scores, styles, uneased = {}, {}, {}
+        scores, styles, uneased, ranges = {}, {}, {}, {}
         for name, clip in engine_dances(song["music"], db, cfg.seed, cfg.accent_engines, style=None).items():
             key = (clip.provenance.style, clip.fps)
             if key not in refs:
@@ -177,12 +182,17 @@ def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
             if st.name not in sources:
                 sources[st.name] = [st.clip(c) for c in range(st.n_clips)]
             scores[name] = _score(clip, song, refs[key], st, sources[st.name])
+            span = (*key, round(clip.duration_s))
+            if span not in speed_ranges:
+                speed_ranges[span] = mocap_speed_range(clips_by_style[key], refs[key].joint_speed_p99_m_s,
+                                                       clip.duration_s)
+            ranges[name] = speed_ranges[span]
             styles[name] = clip.provenance.style
             uneased[name] = _uneased(name, clip, song, db, cfg.seed) if name not in PLAIN_ALREADY else \
                 {**{k: scores[name].get(k) for k in ACCENT_KEYS}, "same_path": 1.0}   # its timing is plain
         per_song.append({"song": song["name"], "set": song["set"], "tempo_bpm": song["music"].tempo_bpm,
                          "beats_per_bar": song["beats_per_bar"], "styles": styles, "scores": scores,
-                         "uneased": uneased})
+                         "uneased": uneased, "speed_range": ranges})
     mocap = {}
     for (style, _), clips in clips_by_style.items():
         if progress:
@@ -190,7 +200,42 @@ def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
         rows = mocap_scores(_mocap_evaluate, clips, cfg.mocap_max_clips)
         mocap[style] = rows["mean"]
     return {"engines": list(cfg.accent_engines), "songs": per_song, "mocap": mocap, "split": split_name(cfg),
-            "summary": summarise(per_song, mocap, cfg.accent_engines)}
+            "summary": summarise(per_song, mocap, cfg.accent_engines),
+            "speed_guard": speed_guard(per_song, cfg.accent_engines)}
+
+
+SPEED_GUARD = 0.25       # p99 joint speed within +-25 % of the style's mocap's (issue 31 item 5)
+SPEED_RANGE = (5.0, 95.0)  # the percentiles of the mocap's own stretches that bound its range
+
+
+def mocap_speed_range(clips: list, reference_p99: float, duration_s: float, windows: int = 200) -> list[float]:
+    """The ``SPEED_RANGE`` percentiles, over ``windows`` stretches of ``duration_s`` of a style's mocap
+    (its ``clips`` end to end, each clip's speeds its own: no joins), of their p99 joint speed over
+    ``reference_p99``, the whole mocap's: how far the capture itself strays from its own p99 at that length."""
+    from ..eval.motion_metrics import joint_speeds
+
+    speeds = np.concatenate([joint_speeds(c) for c in clips if c.n_frames > 1])
+    n = int(round(duration_s * clips[0].fps))
+    if n >= len(speeds) or n < 2:
+        return [1.0, 1.0]
+    starts = np.unique(np.linspace(0, len(speeds) - n, windows).astype(np.int64))
+    p99 = np.array([np.percentile(speeds[a:a + n], 99) for a in starts]) / reference_p99
+    return [float(v) for v in np.percentile(p99, SPEED_RANGE)]
+
+
+def speed_guard(per_song: list[dict], engines) -> dict:
+    """Per engine: the dances whose p99 joint speed lies outside +-``SPEED_GUARD`` of the style's mocap, and
+    of those, the ones outside the mocap's own range over as long a stretch too."""
+    out = {}
+    for e in engines:
+        rows = [(s["song"], s["scores"][e].get("joint_speed_p99_vs_mocap"), s.get("speed_range", {}).get(e))
+                for s in per_song if e in s["scores"]]
+        rows = [r for r in rows if r[1] is not None]
+        outside = [r for r in rows if abs(r[1] - 1.0) > SPEED_GUARD]
+        beyond = [r for r in outside if r[2] is not None and not r[2][0] <= r[1] <= r[2][1]]
+        out[e] = {"dances": len(rows), "outside": len(outside), "outside_mocap_range": len(beyond),
+                  "songs_outside": [{"song": r[0], "ratio": r[1], "mocap_range": r[2]} for r in outside]}
+    return out
 
 
 def _mocap_evaluate(clip, **kwargs):
@@ -247,4 +292,13 @@ def format_accents(s: dict) -> str:
                     + [None])
         blocks.append(table(f"Visible accents, {title}: mean over {n} songs", header, rows,
                             [0] + [2] * (len(header) - 1)))
+    guard = s.get("speed_guard")
+    if guard:
+        blocks.append("  p99 joint speed outside ±25 % of the style's mocap, song by song (and of those, outside the "
+                      f"mocap's own {SPEED_RANGE[0]:g}-{SPEED_RANGE[1]:g} % range over stretches as long as the song):")
+        for e, g in guard.items():
+            worst = ", ".join(f"{x['song'][:28]} {x['ratio']:.2f}" + (f" [{x['mocap_range'][0]:.2f}-"
+                              f"{x['mocap_range'][1]:.2f}]" if x["mocap_range"] else "") for x in g["songs_outside"])
+            blocks.append(f"    {TITLES[e]:<14}{g['outside']:>3} of {g['dances']:<3} ({g['outside_mocap_range']})"
+                          + (f"  {worst}" if worst else ""))
     return "\n".join(blocks + [f"  {MOCAP_NOTE}"])

@@ -103,6 +103,8 @@ class EngineConfig:
                                        # the tune split: 93 costs more accents, 98 left a song at 1.25x p99
     intensity_weight: float = 8.0     # eq. (8)'s intensity match against the stop, jump and repeat costs
                                       # beyond the paper (1 = the weight they were tuned at)
+    shown_intensity: bool = True      # match the intensity each piece shows at the song's tempo against the
+                                      # style's own (MetaMotionGraph.shown_intensity_z; False = eq. 5's w1_z)
     replay_reward: float = 40.0       # the song's form: arriving on a repeated section's beat at the node
                                       # danced on its pair (engines/form.py); above repeat_penalty, which the
                                       # first occurrence's nodes still carry
@@ -114,7 +116,8 @@ class EngineConfig:
     def paper(cls) -> "EngineConfig":
         """The objective of eq. (4)-(9) alone: no repeat penalty, no jump cost, no accent costs."""
         return cls(repeat_penalty=0.0, jump_cost=0.0, accent=None, bar_accent=0.0, downbeat_stop=0.0,
-                   ease_beats=0.0, ease_downbeat=0.0, intensity_weight=1.0, replay_reward=0.0, section_accent=0.0)
+                   ease_beats=0.0, ease_downbeat=0.0, intensity_weight=1.0, replay_reward=0.0, section_accent=0.0,
+                   shown_intensity=False)
 
     def beat_ease(self, n: int, bar_position, beats_per_bar) -> np.ndarray:
         """The accent timing of each of ``n`` beats (``timing.beat_ease``)."""
@@ -266,6 +269,7 @@ class GraphEngine:
             return search(self.graph, target, np.diff(beats), start_nodes=start,
                           prev_duration_s=state.prev_duration_s, thc=thc, node_penalty=node_penalty,
                           steps=self.steps, intensity_weight=self.config.intensity_weight,
+                          shown_intensity=self.config.shown_intensity,
                           **self._beat_costs(bars, segment.music_beat), **self._targets(targets, state.beat, plan))
 
         path = best(penalty)
@@ -322,6 +326,7 @@ class GraphEngine:
             return search(self.graph, target, np.diff(beat_times_s),
                           start_nodes=state.start_nodes, thc=0.0, steps=self.steps,
                           intensity_weight=self.config.intensity_weight,
+                          shown_intensity=self.config.shown_intensity,
                           **self._beat_costs(bar_position, music_beat), **self._targets(targets, 0, self.form))
 
         path = best()

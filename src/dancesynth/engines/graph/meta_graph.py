@@ -139,6 +139,29 @@ class MetaMotionGraph:
         out[ok] = self.render_frame[nxt[ok]] - self.render_frame[ok]
         return out
 
+    def shown_intensity_z(self, durations_s) -> np.ndarray:
+        """(K, N) each node's mono-edge intensity as shown in beats of ``durations_s``, standardised
+        against the style's own: each piece at its captured speed.
+
+        A piece of L source seconds played in a beat of d seconds moves L / d times as fast, so it shows
+        the kinetic power ``(w1 / L) (L / d)^2``. ``w1_z`` standardises against the pieces' own spread
+        only, so on a song faster than the style the whole range of the style's moves shows up faster
+        than captured (a 160 bpm song in a 141 bpm style: every move at 1.13x, the style's fastest
+        ones faster than the mocap ever is); standardised against the power each piece shows at its
+        own tempo, the intensity match picks calmer pieces there and livelier ones on a slow song,
+        so the dance shows the style's own range of power."""
+        d = np.asarray(durations_s, dtype=np.float64)[:, None]
+        length = self.frames_to_next() / self.fps
+        has = (length > 0) & np.isfinite(self.w1)
+        out = np.zeros((d.shape[0], self.n_nodes))
+        if has.sum() < 2:
+            return out + self.w1_z
+        own = self.w1[has] / length[has]
+        if not own.std() > 0:
+            return out + self.w1_z
+        out[:, has] = (self.w1[has] * length[has] / np.maximum(d, 1e-6) ** 2 - own.mean()) / own.std()
+        return out
+
     def arrays(self) -> dict:
         return {k: v for k, v in self.__dict__.items() if isinstance(v, np.ndarray)}
 

@@ -63,7 +63,8 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
            accent: AccentCosts | None = None, beat_class: np.ndarray | None = None,
            class_cost: np.ndarray | None = None, steps: "StepCosts | None" = None,
            intensity_weight: float = 1.0, beat_target: np.ndarray | None = None,
-           target_reward: float = 0.0, entry: np.ndarray | None = None, entry_cost: float = 0.0) -> Path:
+           target_reward: float = 0.0, entry: np.ndarray | None = None, entry_cost: float = 0.0,
+           shown_intensity: bool = False) -> Path:
     """Best path for K beat intervals (eq. 7-9).
 
     ``intensity_z`` (K,) are the normalised music intensities, ``durations_s`` (K,)
@@ -83,6 +84,8 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     On a beat where ``entry`` (K+1,) is set, the path may also cut into that beat's target from
     wherever it is, for ``entry_cost`` (a jump along no edge of the graph: the render blends it),
     so that a replay starts on its section's first beat however far the dance is from it.
+    ``shown_intensity``: match the intensity each node's piece shows in its beat against the style's own
+    (``MetaMotionGraph.shown_intensity_z``) instead of eq. (5)'s ``w1_z``.
 
     On a large graph only the steps leaving a node the path can be at (a finite cost) are
     relaxed: a streaming segment starts at one node, and within a segment's few beats the path
@@ -101,7 +104,8 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     # in: the same result, fewer operations, and backtracking is unaffected.
     penalty = None if node_penalty is None else np.asarray(node_penalty, dtype=np.float64)
     prev = np.r_[np.nan if prev_duration_s is None else prev_duration_s, durations_s[:-1]]
-    terms = BeatTerms(steps, intensity_weight * np.abs(graph.w1_z - intensity_z[:, None]), durations_s, prev)
+    w1_z = graph.shown_intensity_z(durations_s) if shown_intensity else graph.w1_z
+    terms = BeatTerms(steps, intensity_weight * np.abs(w1_z - intensity_z[:, None]), durations_s, prev)
     reached = np.flatnonzero(np.isfinite(costs[0]))
 
     for k in range(k_steps):
