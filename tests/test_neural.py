@@ -210,6 +210,29 @@ def test_beat_warp_moves_generated_beats_onto_music_beats():
     assert np.all(np.diff(_warp_positions(t, (am, ag))) > 0)   # time never runs backwards
 
 
+def test_the_beat_warp_speeds_motion_up_only_within_the_styles_speed():
+    """Issue 31 item 5: a generated beat that comes late is caught up by playing the stretch before it
+    faster; where that stretch already moves near the style's fastest, the beat is let go instead (the
+    next one takes the anchor), and slowing down is always allowed."""
+    from dancesynth.engines.neural.engine import beat_warp
+
+    music = np.arange(0.0, 4.01, 0.5)
+    motion = music.copy()
+    motion[4] += 0.1                                  # a beat generated 0.1 s late: 1.2x to catch up
+    motion[6] -= 0.1                                  # one 0.1 s early: 0.8x
+    t = np.linspace(0.0, 4.5, 451)
+    calm = (t, np.full(t.size, 1.0))
+    fast = (t, np.where((t > 1.5) & (t < 2.85), 2.6, 1.0))   # 2.6 m/s from 1.5 s to 2.85 s
+    am, ag = beat_warp(motion, music, speed=calm, speed_limit=3.0)
+    np.testing.assert_array_equal(am, music)          # every beat anchored
+    am, ag = beat_warp(motion, music, speed=fast, speed_limit=3.0)
+    assert 2.0 not in am                               # 2.6 m/s x 1.2 would pass 3 m/s: let go ...
+    assert {1.5, 2.5, 3.0, 3.5} <= set(am)             # ... its neighbours kept, the early one slowed
+    rates = np.diff(ag) / np.diff(am)
+    assert rates[am[:-1] < 2.9].max() == pytest.approx(1.0)   # nothing sped up in the fast stretch
+    assert beat_warp(motion, music)[0].tolist() == music.tolist()   # no speed given: as before
+
+
 def test_each_frame_sees_its_motif_word_and_half_a_word_ahead_the_next_one():
     from dancesynth.engines.neural.data import LOOKAHEAD, exemplar_samples
     from dancesynth.motion.words import FEATURE_DIM, WORD_FRAMES
