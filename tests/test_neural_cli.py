@@ -125,7 +125,9 @@ def test_the_spread_post_filter_livens_the_network_at_a_cap_and_is_off_by_defaul
     assert np.array_equal(full.provenance.motifs["motif_plan"], alone.provenance.motifs["motif_plan"])
     lf, la = liveliness(full), liveliness(alone)
     assert lf["root_travel_m_per_min"] > 1.05 * la["root_travel_m_per_min"]
-    assert lf["joint_speed_p99"] > 1.05 * la["joint_speed_p99"]
+    # Faster joints, though the beat warp no longer speeds up what is already as fast as the style's fastest
+    # (WARP_SPEED_PERCENTILE): measured 1.046x.
+    assert lf["joint_speed_p99"] > 1.03 * la["joint_speed_p99"]
     assert lf["joint_speed_p99"] < 1.3 * 2.50 and lf["hand_in_head"] <= 0.02 and lf["one_frame_steps"] == 0
     assert main(["dance", SONG, "--engine", "neural", "--paper", "-o", str(tmp_path / "p.bvh")]) == 0
     assert "the network alone" in capsys.readouterr().out
