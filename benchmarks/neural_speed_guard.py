@@ -26,9 +26,9 @@ KEYS = ("joint_speed_p99_vs_mocap", "accent_precision", "accent_recall", "visibl
 
 def main() -> None:
     from dancesynth.api import dance
-    from dancesynth.bench.accents import SPEED_GUARD, _songs, mocap_speed_range
+    from dancesynth.bench.accents import _songs, mocap_speed_range, mocap_speeds, speed_guard
     from dancesynth.bench.common import BenchConfig
-    from dancesynth.bench.quality import at_fps
+    from dancesynth.bench.quality import at_fps, mean_scores
     from dancesynth.engines.neural import engine as neural
     from dancesynth.eval.evaluate import evaluate, mocap_reference
     from dancesynth.motion.database import open_database
@@ -38,38 +38,37 @@ def main() -> None:
     args = ap.parse_args()
     db = open_database()
     songs = _songs(replace(BenchConfig.full(), groundtruth_split=args.split), None)
+    settings = {"limited": neural.WARP_SPEED_PERCENTILE, "unlimited": None}
     refs, rows = {}, []
     for song in songs:
-        row = {"song": song["name"], "set": song["set"], "tempo_bpm": song["music"].tempo_bpm}
-        for name, percentile in (("limited", neural.WARP_SPEED_PERCENTILE), ("unlimited", None)):
+        # As bench section 7's per-song records, with the two settings for engines (``speed_guard``).
+        row = {"song": song["name"], "set": song["set"], "tempo_bpm": song["music"].tempo_bpm, "scores": {},
+               "speed_range": {}}
+        for name, percentile in settings.items():
             with mock.patch.object(neural, "WARP_SPEED_PERCENTILE", percentile):
                 clip = dance(song["music"], database=db, engine="neural")
             style = db.styles[clip.provenance.style]
             if style.name not in refs:
                 clips = [at_fps(style.clip(c), clip.fps) for c in range(style.n_clips)]
-                refs[style.name] = (mocap_reference(clips, clip.fps), clips)
-            ref, clips = refs[style.name]
+                refs[style.name] = (mocap_reference(clips, clip.fps), mocap_speeds(clips))
+            ref, speeds = refs[style.name]
             r = evaluate(clip, mocap=ref, music_beats_s=song["beats"], music_loudness_db=song["loudness"])
-            row[name] = {k: r.get(k) for k in KEYS}
+            row["scores"][name] = {k: r.get(k) for k in KEYS}
             row["style"] = style.name
-            row["mocap_range"] = mocap_speed_range(clips, ref.joint_speed_p99_m_s, clip.duration_s)
+            row["speed_range"][name] = mocap_speed_range(speeds, clip.fps, ref.joint_speed_p99_m_s, clip.duration_s)
         rows.append(row)
-        print(f"{song['name'][:28]:>28} {row['tempo_bpm']:6.1f} "
-              f"{row['style']:>17}  p99 / mocap {row['unlimited']['joint_speed_p99_vs_mocap']:.2f} -> "
-              f"{row['limited']['joint_speed_p99_vs_mocap']:.2f}  (mocap's own {row['mocap_range'][0]:.2f}-"
-              f"{row['mocap_range'][1]:.2f})", flush=True)
+        lo, hi = row["speed_range"]["limited"]
+        print(f"{song['name'][:28]:>28} {row['tempo_bpm']:6.1f} {row['style']:>17}  p99 / mocap "
+              f"{row['scores']['unlimited']['joint_speed_p99_vs_mocap']:.2f} -> "
+              f"{row['scores']['limited']['joint_speed_p99_vs_mocap']:.2f}  (mocap's own {lo:.2f}-{hi:.2f})", flush=True)
+    guard = speed_guard(rows, settings)
+    generated = speed_guard([r for r in rows if r["set"] == "generated"], settings)
     summary = {}
-    for name in ("unlimited", "limited"):
-        ratio = np.array([r[name]["joint_speed_p99_vs_mocap"] for r in rows])
-        outside = np.abs(ratio - 1.0) > SPEED_GUARD
-        beyond = outside & np.array([not lo <= x <= hi for x, (lo, hi) in zip(ratio, (r["mocap_range"] for r in rows))])
-        generated = np.array([r["set"] == "generated" for r in rows])
-        summary[name] = {"outside": int(outside.sum()), "outside_generated": int(outside[generated].sum()),
-                         "outside_mocap_range": int(beyond.sum()), "dances": len(rows),
-                         "furthest_from_1": float(np.abs(ratio - 1.0).max()),
-                         **{f"mean_{k}": float(np.nanmean([r[name][k] if r[name][k] is not None else np.nan
-                                                           for r in rows])) for k in KEYS}}
-        s = summary[name]
+    for name in settings:
+        ratio = np.array([r["scores"][name]["joint_speed_p99_vs_mocap"] for r in rows])
+        summary[name] = s = {**guard[name], "outside_generated": generated[name]["outside"],
+                             "furthest_from_1": float(np.abs(ratio - 1.0).max()),
+                             **{f"mean_{k}": v for k, v in mean_scores([r["scores"][name] for r in rows]).items()}}
         print(f"{name:>10}: outside +-25 % {s['outside']} of {s['dances']} ({s['outside_generated']} generated; "
               f"{s['outside_mocap_range']} outside the mocap's own range too), furthest from 1 "
               f"{s['furthest_from_1']:.2f}; precision {s['mean_accent_precision']:.3f}, recall "

@@ -239,17 +239,18 @@ def test_accents_score_every_engine_beside_chance_a_random_walk_and_the_mocap(be
 def test_the_mocaps_own_speed_range_narrows_as_its_stretches_lengthen(bundled_db):
     """A stretch of mocap strays from the whole capture's p99 joint speed the more the shorter it is: 5 s of
     salsa-97-124bpm span 0.61-1.51x (measured), 90 s stay within the guard's +-25 %."""
-    from dancesynth.bench.accents import mocap_speed_range
+    from dancesynth.bench.accents import mocap_speed_range, mocap_speeds
     from dancesynth.bench.quality import at_fps
     from dancesynth.eval.evaluate import mocap_reference
 
     style = bundled_db.styles["salsa-97-124bpm"]
     clips = [at_fps(style.clip(c), 30.0) for c in range(style.n_clips)]
     whole = mocap_reference(clips, 30.0).joint_speed_p99_m_s
-    short, long_ = (mocap_speed_range(clips, whole, d) for d in (5.0, 90.0))
+    speeds = mocap_speeds(clips)
+    short, long_ = (mocap_speed_range(speeds, 30.0, whole, d) for d in (5.0, 90.0))
     assert short[0] < 0.75 and short[1] > 1.25
     assert short[0] < long_[0] <= 1.0 <= long_[1] < short[1] and 0.75 < long_[0] and long_[1] < 1.25
-    assert mocap_speed_range(clips, whole, 1e5) == [1.0, 1.0]   # longer than the capture: no stretch to compare
+    assert mocap_speed_range(speeds, 30.0, whole, 1e5) == [1.0, 1.0]   # longer than the capture: no stretch to compare
 
 
 def test_form_scores_each_engine_with_and_without_the_song_form(bench):

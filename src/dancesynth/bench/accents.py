@@ -166,7 +166,7 @@ def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
     from ..eval.evaluate import mocap_reference
 
     songs = _songs(cfg, progress)
-    clips_by_style, refs, sources, speed_ranges = {}, {}, {}, {}
+    clips_by_style, refs, sources, speeds, speed_ranges = {}, {}, {}, {}, {}
     per_song = []
     for i, song in enumerate(songs):
         if progress:
@@ -178,13 +178,14 @@ def accents(cfg: BenchConfig, db, progress: Progress | None = None) -> dict:
                 clips_by_style[key] = [at_fps(db.styles[key[0]].clip(c), clip.fps)
                                        for c in range(db.styles[key[0]].n_clips)]
                 refs[key] = mocap_reference(clips_by_style[key], clip.fps)
+                speeds[key] = mocap_speeds(clips_by_style[key])
             st = db.styles[key[0]].material  # the dance's source frames index its material
             if st.name not in sources:
                 sources[st.name] = [st.clip(c) for c in range(st.n_clips)]
             scores[name] = _score(clip, song, refs[key], st, sources[st.name])
             span = (*key, round(clip.duration_s))
             if span not in speed_ranges:
-                speed_ranges[span] = mocap_speed_range(clips_by_style[key], refs[key].joint_speed_p99_m_s,
+                speed_ranges[span] = mocap_speed_range(speeds[key], clip.fps, refs[key].joint_speed_p99_m_s,
                                                        clip.duration_s)
             ranges[name] = speed_ranges[span]
             styles[name] = clip.provenance.style
@@ -208,14 +209,19 @@ SPEED_GUARD = 0.25       # p99 joint speed within +-25 % of the style's mocap's 
 SPEED_RANGE = (5.0, 95.0)  # the percentiles of the mocap's own stretches that bound its range
 
 
-def mocap_speed_range(clips: list, reference_p99: float, duration_s: float, windows: int = 200) -> list[float]:
-    """The ``SPEED_RANGE`` percentiles, over ``windows`` stretches of ``duration_s`` of a style's mocap
-    (its ``clips`` end to end, each clip's speeds its own: no joins), of their p99 joint speed over
-    ``reference_p99``, the whole mocap's: how far the capture itself strays from its own p99 at that length."""
+def mocap_speeds(clips: list) -> np.ndarray:
+    """(F, J) the joint speeds of a style's mocap ``clips`` end to end, each clip's its own (no joins)."""
     from ..eval.motion_metrics import joint_speeds
 
-    speeds = np.concatenate([joint_speeds(c) for c in clips if c.n_frames > 1])
-    n = int(round(duration_s * clips[0].fps))
+    return np.concatenate([joint_speeds(c) for c in clips if c.n_frames > 1])
+
+
+def mocap_speed_range(speeds: np.ndarray, fps: float, reference_p99: float, duration_s: float,
+                      windows: int = 200) -> list[float]:
+    """The ``SPEED_RANGE`` percentiles, over ``windows`` stretches of ``duration_s`` of a style's mocap
+    (``mocap_speeds`` at ``fps``), of their p99 joint speed over ``reference_p99``, the whole mocap's: how
+    far the capture itself strays from its own p99 at that length."""
+    n = int(round(duration_s * fps))
     if n >= len(speeds) or n < 2:
         return [1.0, 1.0]
     starts = np.unique(np.linspace(0, len(speeds) - n, windows).astype(np.int64))

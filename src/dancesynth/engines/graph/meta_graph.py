@@ -153,12 +153,10 @@ class MetaMotionGraph:
         d = np.asarray(durations_s, dtype=np.float64)[:, None]
         length = self.frames_to_next() / self.fps
         has = (length > 0) & np.isfinite(self.w1)
+        own = self.w1[has] / length[has]   # the power each piece shows at its own tempo
+        if own.size < 2 or not own.std() > 0:
+            return np.tile(self.w1_z, (d.shape[0], 1))
         out = np.zeros((d.shape[0], self.n_nodes))
-        if has.sum() < 2:
-            return out + self.w1_z
-        own = self.w1[has] / length[has]
-        if not own.std() > 0:
-            return out + self.w1_z
         out[:, has] = (self.w1[has] * length[has] / np.maximum(d, 1e-6) ** 2 - own.mean()) / own.std()
         return out
 
