@@ -35,6 +35,7 @@ def main() -> None:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--split", choices=("test", "tune"), default="test")
+    ap.add_argument("--out", type=Path, default=REPO / "benchmarks" / "results" / "neural_speed_guard.json")
     args = ap.parse_args()
     db = open_database()
     songs = _songs(replace(BenchConfig.full(), groundtruth_split=args.split), None)
@@ -54,7 +55,7 @@ def main() -> None:
             ref, speeds = refs[style.name]
             r = evaluate(clip, mocap=ref, music_beats_s=song["beats"], music_loudness_db=song["loudness"])
             row["scores"][name] = {k: r.get(k) for k in KEYS}
-            row["style"] = style.name
+            row["style"], row["rate"] = style.name, clip.provenance.run.fit["typical_rate"]   # captured / danced beat
             row["speed_range"][name] = mocap_speed_range(speeds, clip.fps, ref.joint_speed_p99_m_s, clip.duration_s)
         rows.append(row)
         lo, hi = row["speed_range"]["limited"]
@@ -74,7 +75,7 @@ def main() -> None:
               f"{s['furthest_from_1']:.2f}; precision {s['mean_accent_precision']:.3f}, recall "
               f"{s['mean_accent_recall']:.3f}, visible x chance {s['mean_visible_accent_precision_x_chance']:.2f}, "
               f"Spearman {s['mean_intensity_spearman']:.3f}")
-    out = REPO / "benchmarks" / "results" / "neural_speed_guard.json"
+    out = args.out
     out.write_text(json.dumps({"split": args.split, "warp_speed_percentile": neural.WARP_SPEED_PERCENTILE,
                                "summary": summary, "songs": rows}, indent=1) + "\n")
     print(f"wrote {out}")

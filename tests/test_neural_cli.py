@@ -181,3 +181,26 @@ def test_train_bad_input(tmp_path, capsys):
 
         train("salsa", "huge")
     assert not list(tmp_path.iterdir())
+
+
+def test_a_song_too_fast_for_salsas_beat_is_not_danced_slower_than_salsa_was_captured(bundled_db):
+    """Issue 31 item 5. At 182 bpm salsa fits best at half time, 0.78x its captured speed; the network's
+    joint speed follows the rate down (0.70-0.85 of the mocap's p99 by seed on a 130 s song), so the
+    neural engine dances the beat instead, where the beat warp's speed limit holds the speed."""
+    from dancesynth.bench.quality import at_fps
+    from dancesynth.engines.beatgrid import RATE_RANGE, fit_style
+    from dancesynth.engines.neural.engine import neural_fit
+    from dancesynth.eval.evaluate import evaluate, mocap_reference
+    from dancesynth.types import MusicFeatures
+
+    beats = 0.25 + np.arange(150) * 60.0 / 182.0
+    loud = -18.0 + 3.0 * np.sin(np.arange(149) / 7.0)
+    music = MusicFeatures(beats[-1] + 0.3, beats, loud, 182.0, beats_per_bar=4, beat_in_bar=np.arange(150) % 4)
+    assert fit_style(bundled_db, music, "salsa").rate < RATE_RANGE[0]   # the graph engines' choice, slowed
+    fit = neural_fit(bundled_db, music, "salsa")
+    assert fit.rate >= 1.0 and fit.level == "beat"
+    clip = dance(music, database=bundled_db, engine="neural", seed=0)
+    assert clip.provenance.style == fit.style.name and clip.provenance.summary["level"] == "beat"
+    style = fit.style
+    ref = mocap_reference([at_fps(style.clip(c), clip.fps) for c in range(style.n_clips)], clip.fps)
+    assert 0.75 <= evaluate(clip, mocap=ref)["joint_speed_p99_vs_mocap"] <= 1.25   # the guard, +-25 %
