@@ -112,7 +112,7 @@ def batch_row(name: str, songs: list[Path], out: Path, args: list[str]) -> dict:
     return row(name, wall, cpu if "--ray" not in args else worker_cpu, len(songs), {
         "worker_cpu_per_song_s": worker_cpu / len(songs),
         "overhead_per_song_s": statistics.median(overhead),
-        "database_and_graph_per_song_s": statistics.median(r["timings_s"]["database_s"] + r["timings_s"]["graph_s"]
+        "database_and_graph_per_song_s": statistics.median(r["timings_s"]["database_s"] + r["timings_s"]["prepare_s"]
                                                            for r in recs),
         "peak_rss_mb_per_worker": max(r["peak_rss_mb"] for r in recs),
         "workers": len({r["worker"] for r in recs})})

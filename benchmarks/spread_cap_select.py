@@ -57,7 +57,7 @@ def main() -> None:
     shipped = neural.SPREAD_CAP
     try:
         for cap in caps:
-            neural.SPREAD_CAP = cap   # what neural_dance reads
+            neural.SPREAD_CAP = cap   # what the neural engine's dance reads
             live, acc, dances[cap] = [], [], []
             for song in songs:
                 for seed in range(TUNING_SEED, TUNING_SEED + args.seeds):

@@ -117,11 +117,11 @@ def dance(song, output, character, bone_map, database, report_path, quiet, **opt
         spread = (f"spread post-filter up to {s['spread_cap']:g}x" if s.get("spread_cap", 1.0) > 1.0
                   else "the network alone")
         click.echo(f"model     {s['model_name']}, sha256 {s['model_sha256']}, {spread}: {s['model']}")
-    # The choreography and neural engines spend the graph's stage on motifs and on loading the model.
-    stage = {"choreography": "motifs", "neural": "model"}.get(s["engine"], "graph")
-    cached = " (cached)" if stage == "graph" and s["graph_cached"] else ""
+    # What the engine loaded or built before dancing: the graph, the motif bank, the network (engines/protocol.py).
+    stage = s.get("prepare_stage", "preparation")
+    cached = " (cached)" if s.get("graph_cached") else ""
     click.echo(f"time      music {tm['music_s']:.2f} s, database {tm['database_s']:.2f} s, {stage} "
-               f"{tm['graph_s']:.2f} s{cached}, synthesis "
+               f"{tm['prepare_s']:.2f} s{cached}, synthesis "
                f"{tm['synthesis_s']:.2f} s, write {tm['write_s']:.2f} s; total {time.perf_counter() - t0:.2f} s")
     click.echo(f"wrote     {output} ({s['frames']} frames at {s['fps']:g} fps, on {target.name}"
                + (f", {moved.skeleton.n_joints} joints" if suffix != ".mp4" else "") + ")")

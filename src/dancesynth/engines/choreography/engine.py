@@ -86,6 +86,25 @@ def _check_constraints(fixed: dict, bank, style: Style) -> None:
                          "those or another --style ('dancesynth motifs' shows a dance's motifs)")
 
 
+def dance(music: MusicFeatures, db: MotionDatabase, config, timings: dict,
+          progress=None) -> tuple[MotionClip, EngineRun]:
+    """The choreography engine under the engine protocol (``engines.protocol``): the database's motif
+    model and ``config.recreate``'s reference dance loaded, then ``choreography_dance``."""
+    from ...motion.motifs import load_motif_model
+
+    t = time.perf_counter()
+    reference = None
+    if config.recreate is not None:
+        from ...io.bvh import read_bvh
+
+        reference = read_bvh(config.recreate)
+    model = load_motif_model(db)
+    loaded_s = time.perf_counter() - t
+    clip, run = choreography_dance(music, db, config, timings=timings, motif_model=model, reference=reference)
+    timings["prepare_s"] += loaded_s
+    return clip, run
+
+
 def choreography_dance(music: MusicFeatures, db: MotionDatabase, config, *, timings: dict, motif_model,
                        reference: MotionClip | None = None,
                        mixer: MixerConfig = MixerConfig()) -> tuple[MotionClip, EngineRun]:
@@ -106,7 +125,7 @@ def choreography_dance(music: MusicFeatures, db: MotionDatabase, config, *, timi
     fit = _choose(db, music, config.style, ref)
     style, subdivide = fit.style, fit.subdivide
     bank = style_bank(style, model, mixer.accent_window)
-    timings["graph_s"] = time.perf_counter() - t  # the motif stage takes the graph's place
+    timings["prepare_s"] = time.perf_counter() - t
 
     t = time.perf_counter()
     grid = beat_grid(music, subdivide=subdivide)
@@ -140,7 +159,7 @@ def choreography_dance(music: MusicFeatures, db: MotionDatabase, config, *, timi
     jumps = p.t0[p.jump]
     jumps = jumps[(jumps >= 0.0) & (jumps < music.duration_s)]
     warp_rates = (p.f1 - p.f0) / (p.t1 - p.t0) / style.fps
-    extra = {"graph_cached": True, "motifs": model.k,
+    extra = {"prepare_stage": "motifs", "motifs": model.k,
              "motif_chi2": chi2(model.templates[style.genre], model.signature(result.motifs)),
              "plan_followed": float(np.mean(result.motifs == plan)), "constraints": len(fixed),
              "recreate": None if ref is None else ref.path,

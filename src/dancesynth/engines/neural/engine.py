@@ -206,8 +206,10 @@ def neural_fit(db: MotionDatabase, music: MusicFeatures, genre: str) -> StyleFit
     return max(faster, key=lambda f: f.share) if faster else fit
 
 
-def neural_dance(music: MusicFeatures, db: MotionDatabase, config, *, timings: dict) -> tuple[MotionClip, EngineRun]:
-    """``api.dance`` for ``config.engine == "neural"``: choose style and model, generate, summarise."""
+def dance(music: MusicFeatures, db: MotionDatabase, config, timings: dict,
+          progress=None) -> tuple[MotionClip, EngineRun]:
+    """The neural engine under the engine protocol (``engines.protocol``): choose style and model,
+    generate, summarise."""
     t = time.perf_counter()
     if config.model is not None and not Path(config.model).is_file():
         raise InputError(f"--model {config.model}: no such file (a .pt written by 'dancesynth train')")
@@ -219,7 +221,7 @@ def neural_dance(music: MusicFeatures, db: MotionDatabase, config, *, timings: d
     if model.skeleton.names != style.skeleton.names:
         raise ModelError(f"the neural model {model.path} was trained on another skeleton than style "
                          f"'{style.name}'; retrain it with 'dancesynth train --style {style.genre}'")
-    timings["graph_s"] = time.perf_counter() - t
+    timings["prepare_s"] = time.perf_counter() - t
     t = time.perf_counter()
     grid = beat_grid(music, subdivide=subdivide)
     seed = 0 if config.seed is None else int(config.seed)
@@ -243,7 +245,7 @@ def neural_dance(music: MusicFeatures, db: MotionDatabase, config, *, timings: d
     run = EngineRun(style=style.name, genre=style.genre, style_fingerprint=style.fingerprint, subdivide=subdivide,
                     grid_times_s=grid.times_s, warp_rates=clip.meta["warp_rates"], step_s=(timings["synthesis_s"],),
                     motifs={"motif_plan": motifs}, fit=fit_summary(fit, music, None), form=form,
-                    extra={"graph_cached": True, **model_id(model),
+                    extra={"prepare_stage": "model", **model_id(model),
                            "spread_cap": clip.meta["spread_cap"], "form": form.summary(motifs),
                            "realtime_factor": music.duration_s / max(timings["synthesis_s"], 1e-9)})
     return clip, run
