@@ -473,3 +473,21 @@ def test_a_twist_made_over_three_frames_is_mended_and_never_plays_as_a_snap(g1_c
     # the pose before and after is kept: the twist is spread over the window, not undone
     np.testing.assert_allclose(np.abs(np.sum(fixed.local_rot[[180, 240], j] * q[[180, 240], j], axis=-1)), 1.0,
                                atol=1e-6)
+
+
+def test_the_global_dp_does_not_loop_a_cycle_of_beats(bundled_db):
+    """One DP over the whole song remembers nothing it danced: it looped its best-matching cycle (four
+    beats of one take for 20 s on a tune-split song; 25 % of this song's beats replayed the last minute).
+    Searched again with the beats it comes back to charged, it replays under 10 %, as streaming does."""
+    from dancesynth.engines.graph.engine import EngineConfig
+    from dancesynth.types import MusicFeatures
+
+    beats = np.arange(0.4, 90.0, 60.0 / 104)
+    k = np.arange(len(beats) - 1)
+    loud = -20 + 6 * np.sin(k / 13.0) + np.random.default_rng(0).normal(0, 1.5, len(k))
+    music = MusicFeatures(90.0, beats, loud, 104.0, beats_per_bar=4, beat_in_bar=np.arange(len(beats)) % 4)
+    looped = dance(music, database=bundled_db, engine="global", render=EngineConfig(global_retries=0))
+    clip = dance(music, database=bundled_db, engine="global")
+    before, after = (c.provenance.summary["repetition"] for c in (looped, clip))
+    assert before["replayed_share"] > 0.2 and before["longest_repeat_beats"] >= 8   # measured 0.25, 17 beats
+    assert after["replayed_share"] < 0.1 and after["longest_repeat_beats"] <= 4      # measured 0.08, 3 beats

@@ -83,6 +83,7 @@ class EngineConfig:
     repeat_window_s: float = 60.0     # ... what a viewer remembers: eval.repetition counts replays within it
     repeat_retries: int = 2           # ... and a segment whose path loops back onto its own beats is searched
                                       # again with them charged, at most this often (0 = one search a segment)
+    global_retries: int = 8           # ... the global DP's whole path likewise (engine.revisit_penalty)
     foot_lock: bool = True            # hold planted feet still through blends (leg IK)
     jump_cost: float = 1.0            # added to every jump (0 = paper): fewer, better-motivated jumps (each jump's
                                       # blend slides the feet; 0.25 before the larger database)
@@ -188,6 +189,50 @@ def bar_shape(bar_position: np.ndarray | None, beats_per_bar: int | None, amount
 
 def standardise(values: np.ndarray, mean: float, std: float) -> np.ndarray:
     return (values - mean) / std if std > 1e-9 else np.zeros_like(values)
+
+
+def revisits(nodes: np.ndarray, beat_times_s: np.ndarray, window_s: float,
+             source: np.ndarray | None = None) -> tuple[dict[int, int], int]:
+    """The nodes ``nodes`` (one per beat) comes back to within ``window_s``, each with the beat of its
+    first visit, and how many beats come back. The form's replays (``source`` >= 0, FormPlan.source)
+    are asked for: not counted."""
+    nodes = np.asarray(nodes)
+    times = np.asarray(beat_times_s, dtype=np.float64)[:len(nodes)]
+    free = _form_replays(len(nodes), source)
+    first: dict[int, int] = {}
+    looped: dict[int, int] = {}
+    count = 0
+    for b in range(1, len(nodes)):
+        n = int(nodes[b])
+        if free[b]:
+            continue
+        if n in first and times[b] - times[first[n]] <= window_s:
+            looped.setdefault(n, first[n])
+            count += 1
+        else:
+            first[n] = b
+    return looped, count
+
+
+def revisit_penalty(nodes: np.ndarray, looped: dict[int, int], cost: float,
+                    source: np.ndarray | None = None) -> tuple:
+    """``search``'s ``beat_penalty`` charging each ``looped`` node (``revisits``) ``cost`` on every beat
+    but its first visit: charged only near that visit, a loop would move on to another minute of the
+    song. Beats the form replays are not charged."""
+    free = _form_replays(len(nodes), source)
+    beats = np.flatnonzero(~free)
+    beats = beats[beats > 0]
+    at = [beats[beats != b0] for b0 in looped.values()]
+    on = [np.full(len(a), n) for n, a in zip(looped, at)]
+    at, on = np.concatenate(at), np.concatenate(on)
+    return at, on, np.full(len(at), float(cost))
+
+
+def _form_replays(n: int, source: np.ndarray | None) -> np.ndarray:
+    free = np.zeros(n, bool)
+    if source is not None:
+        free[:min(n, len(source))] = np.asarray(source)[:n] >= 0
+    return free
 
 
 def pieces_from_path(graph: MetaMotionGraph, path: Path, beat_times_s: np.ndarray,
@@ -315,19 +360,37 @@ class GraphEngine:
         inten = np.asarray(intensity_db, dtype=np.float64)
         state = self.initial_state(seed, needed_beats=len(inten))
         t0 = time.perf_counter()
-        # The same objective as streaming (jump cost included) but over the whole song;
-        # the repeat penalty is a streaming memory and has no place in one global DP.
+        # The same objective as streaming (jump cost included) but over the whole song.
         _, _, starts = self._form(state, len(beat_times_s), self.form)
         target = standardise(inten, inten.mean(), inten.std()) + bar_shape(
             None if bar_position is None else bar_position[:-1], beats_per_bar, self.config.bar_accent)
         target = target + self.config.section_accent * starts[:-1]
 
-        def best(targets=None):
+        def searched(targets, charged):
             return search(self.graph, target, np.diff(beat_times_s),
-                          start_nodes=state.start_nodes, thc=0.0, steps=self.steps,
+                          start_nodes=state.start_nodes, thc=0.0, steps=self.steps, beat_penalty=charged,
                           intensity_weight=self.config.intensity_weight,
                           shown_intensity=self.config.shown_intensity,
                           **self._beat_costs(bar_position, music_beat), **self._targets(targets, 0, self.form))
+
+        def best(targets=None):
+            # One DP remembers nothing it danced: alone it loops the song's best-matching cycle (four beats
+            # of one take for 20 s). As streaming charges a beat danced in the last minute, the path is
+            # searched again with each beat it comes back to charged on the beats after its first visit.
+            # Charges move loops as well as end them, so the path that comes back least is kept.
+            source = None if self.form is None else self.form.source
+            path, charged = searched(targets, None), None
+            looped, count = revisits(path.nodes, beat_times_s, self.config.repeat_window_s, source)
+            kept = (count, path)
+            for _ in range(self.config.global_retries if self.config.repeat_penalty > 0 else 0):
+                if not looped:
+                    break
+                more = revisit_penalty(path.nodes, looped, self.config.repeat_penalty, source)
+                charged = more if charged is None else tuple(np.r_[a, b] for a, b in zip(charged, more))
+                path = searched(targets, charged)
+                looped, count = revisits(path.nodes, beat_times_s, self.config.repeat_window_s, source)
+                kept = min(kept, (count, path), key=lambda c: c[0])
+            return kept[1]
 
         path = best()
         if self.form is not None and (self.form.source >= 0).any():

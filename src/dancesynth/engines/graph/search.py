@@ -64,7 +64,7 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
            class_cost: np.ndarray | None = None, steps: "StepCosts | None" = None,
            intensity_weight: float = 1.0, beat_target: np.ndarray | None = None,
            target_reward: float = 0.0, entry: np.ndarray | None = None, entry_cost: float = 0.0,
-           shown_intensity: bool = False) -> Path:
+           shown_intensity: bool = False, beat_penalty: tuple | None = None) -> Path:
     """Best path for K beat intervals (eq. 7-9).
 
     ``intensity_z`` (K,) are the normalised music intensities, ``durations_s`` (K,)
@@ -86,6 +86,8 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     so that a replay starts on its section's first beat however far the dance is from it.
     ``shown_intensity``: match the intensity each node's piece shows in its beat against the style's own
     (``MetaMotionGraph.shown_intensity_z``) instead of eq. (5)'s ``w1_z``.
+    ``beat_penalty`` ``(beats, nodes, costs)``: a cost for arriving at a node on one beat (1..K) only
+    (the global DP charges a node on the beats after it was first danced, ``engine.revisit_penalty``).
 
     On a large graph only the steps leaving a node the path can be at (a finite cost) are
     relaxed: a streaming segment starts at one node, and within a segment's few beats the path
@@ -107,6 +109,11 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
     w1_z = graph.shown_intensity_z(durations_s) if shown_intensity else graph.w1_z
     terms = BeatTerms(steps, intensity_weight * np.abs(w1_z - intensity_z[:, None]), durations_s, prev)
     reached = np.flatnonzero(np.isfinite(costs[0]))
+    if beat_penalty is not None:
+        at, on, cost = (np.asarray(x) for x in beat_penalty)
+        order = np.argsort(at, kind="stable")
+        at, on, cost = at[order], on[order], np.asarray(cost, dtype=np.float64)[order]
+        bounds = np.searchsorted(at, np.arange(k_steps + 2))
 
     for k in range(k_steps):
         # Eq. (8) for every destination at once. A node has one mono step in; jumps are sorted by
@@ -126,6 +133,9 @@ def search(graph: MetaMotionGraph, intensity_z: np.ndarray, durations_s: np.ndar
             row[cut[2]] = cut[1]
         if penalty is not None:
             row += penalty
+        if beat_penalty is not None and bounds[k + 2] > bounds[k + 1]:
+            part = slice(bounds[k + 1], bounds[k + 2])
+            np.add.at(row, on[part], cost[part])
         if beat_class is not None and beat_class[k + 1] >= 0:
             row += class_cost[beat_class[k + 1]]
         if beat_target is not None and beat_target[k + 1] >= 0:
