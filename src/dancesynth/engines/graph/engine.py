@@ -376,7 +376,7 @@ class GraphEngine:
         def best(targets=None):
             # One DP remembers nothing it danced: alone it loops the song's best-matching cycle (four beats
             # of one take for 20 s). As streaming charges a beat danced in the last minute, the path is
-            # searched again with each beat it comes back to charged on the beats after its first visit.
+            # searched again with each beat it comes back to charged on every beat but its first visit.
             # Charges move loops as well as end them, so the path that comes back least is kept.
             source = None if self.form is None else self.form.source
             path, charged = searched(targets, None), None
