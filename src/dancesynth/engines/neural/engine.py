@@ -31,7 +31,7 @@ from ...motion.resample import sample_frames
 from ...motion.roles import find_roles
 from ...provenance import EngineRun
 from ...types import MotionClip, MusicFeatures
-from ..beatgrid import RATE_RANGE, StyleFit, beat_grid, fit_style, fit_summary, style_fits
+from ..beatgrid import RATE_RANGE, StyleFit, beat_grid, equally_good, fit_summary, style_fits
 from ..footlock import FootLockState, lock_feet
 from ..form import form_plan, replay_motion
 from ..handclear import keep_hands_out_of_head
@@ -200,11 +200,11 @@ def neural_fit(db: MotionDatabase, music: MusicFeatures, genre: str) -> StyleFit
     Not double time: it makes the network dance twice the moves at the edge of the tempi it learned (tune
     split, a 90 bpm waltz: accent precision 0.40 -> 0.28, and its p99 at 0.78 was inside the guard).
     """
-    fit = fit_style(db, music, genre)
+    fits = style_fits(db, np.diff(music.beat_times_s), genre, beat_in_bar=music.beat_in_bar)
+    fit = equally_good(fits)[0]   # fit_style's choice, from the same list
     if fit.rate >= RATE_RANGE[0]:
         return fit
-    faster = [f for f in style_fits(db, np.diff(music.beat_times_s), genre, beat_in_bar=music.beat_in_bar)
-              if f.rate >= 1.0 and np.isscalar(f.subdivide) and f.subdivide <= 1]
+    faster = [f for f in fits if f.rate >= 1.0 and np.isscalar(f.subdivide) and f.subdivide <= 1]
     return max(faster, key=lambda f: f.share) if faster else fit
 
 
