@@ -100,8 +100,8 @@ def beat_warp(motion_beats_s: np.ndarray, music_beats_s: np.ndarray, *, reach: f
 
 def _peak(speed, a: float, b: float) -> float:
     """The fastest ``speed`` (``(times_s, m_s)``) between motion times ``a`` and ``b``."""
-    t, v = speed
-    inside = v[(t >= a) & (t <= b)]
+    t, v = speed   # t ascending: a slice, not a mask over the whole song for every beat
+    inside = v[np.searchsorted(t, a, side="left"):np.searchsorted(t, b, side="right")]
     return float(inside.max()) if inside.size else 0.0
 
 
