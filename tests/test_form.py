@@ -68,6 +68,24 @@ def test_vary_dances_the_last_bars_of_each_phrase_anew_and_phrases_that_sound_al
     assert (pairs[8:16] == -1).all()
 
 
+def test_mirror_shows_a_replay_of_a_replay_as_the_moves_themselves():
+    # A's second phrase repeats its first (mirrored); A's return mirrors A: its second phrase is then the
+    # first phrase mirrored twice, the moves themselves (as the first A's second phrase, which it replays).
+    sim = np.eye(24)
+    for a in range(4):
+        sim[4 + a, a] = sim[a, 4 + a] = 0.9
+    music = _music("ABA", similarity=sim)
+    grid = music.beat_times_s
+    plan = form_plan(music, grid, "mirror")
+    phrase2, again, again2 = 4 * 4, 16 * 4, 20 * 4     # grid beats of bars 4, 16 and 20
+    assert plan.source[phrase2] == plan.source[again] == plan.source[again2] == 0
+    danced = np.arange(len(grid))
+    mirror = np.arange(len(grid)) + len(grid)          # each move's mirror image: another value
+    want = plan.targets(danced, 0, len(grid), mirror)
+    assert want[phrase2] == want[again] == mirror[0] and want[again2] == danced[0]
+    assert plan.targets(danced, 0, len(grid))[again] == 0   # no mirror lookup: the same moves
+
+
 def test_bad_repeat_options_are_clear_errors_and_write_nothing(tmp_path, bundled_song):
     from test_cli import run
 

@@ -27,8 +27,9 @@ from ..types import MusicFeatures, SongStructure
 
 REPEAT_MODES = ("same", "mirror", "vary", "off")
 PHRASE_BARS = 4        # phrases repeat, and vary dances the last bars of each anew, in groups of this many
-SAME_PHRASE = 0.6      # a phrase sounding at least this like an earlier one (aligned bars' mean similarity,
-                       # as music.structure.SAME_SECTION) replays its moves
+SAME_PHRASE = 0.45     # a phrase sounding at least this like an earlier one (aligned bars' mean similarity)
+                       # replays its moves: lower than a section's repeat (music.structure.SAME_SECTION 0.6),
+                       # since within a section the chords come round again under a new melody (tune split)
 
 
 def check_repeat(mode: str, vary: float) -> None:
@@ -49,6 +50,9 @@ class FormPlan:
     sections: tuple = ()        # per section: label, name, start_s, end_s, bars and what it replays
     entry: np.ndarray | None = None  # (G,) bool: a replayed bar's first beat, where the dance may cut
                                      # into the replay (a blend, no graph edge needed)
+    flip: np.ndarray | None = None   # (G,) bool: with ``mirror``, the beat shows its source's mirror image (a
+                                     # replay of a replay, e.g. a phrase repeated within a chorus that is
+                                     # itself repeated, is mirrored twice: the same moves)
 
     @property
     def mirrored(self) -> bool:
@@ -70,7 +74,10 @@ class FormPlan:
         out = np.full(n, -1, dtype=np.int64)
         out[ok] = np.asarray(danced)[src[ok]]
         if self.mirrored and mirror is not None:
-            hit = out >= 0
+            flip = np.ones(n, bool)
+            if self.flip is not None:
+                flip[:have] = self.flip[first:first + have]
+            hit = (out >= 0) & flip
             out[hit] = mirror[out[hit]]
         return out
 
@@ -113,7 +120,7 @@ class FormPlan:
 
 def no_plan(n: int, mode: str = "off", sections: tuple = ()) -> FormPlan:
     return FormPlan(mode, np.full(n, -1, dtype=np.int64), np.zeros(n, bool), np.zeros(n, bool), sections,
-                    np.zeros(n, bool))
+                    np.zeros(n, bool), np.zeros(n, bool))
 
 
 def form_plan(music: MusicFeatures, grid_times_s: np.ndarray, mode: str = "same",
@@ -142,8 +149,10 @@ def form_plan(music: MusicFeatures, grid_times_s: np.ndarray, mode: str = "same"
     near = np.where(np.abs(position[near - 1] - want) < np.abs(position[near] - want), near - 1, near)
     replay = (src_bar >= 0) & (np.abs(position[near] - want) < 0.05)
     source = np.where(replay, near, -1)
-    for g in np.flatnonzero(source >= 0):   # a replay of a replay replays the first
-        if source[source[g]] >= 0:
+    hops = (source >= 0).astype(np.int64)
+    for g in np.flatnonzero(source >= 0):   # a replay of a replay replays the first (sources come earlier:
+        if source[source[g]] >= 0:          # theirs are followed already)
+            hops[g] = hops[source[g]] + 1
             source[g] = source[source[g]]
     section = np.array([k for k, s in enumerate(form.sections) for _ in range(s.n_bars)])[bar]
     first_label = {}
@@ -168,7 +177,7 @@ def form_plan(music: MusicFeatures, grid_times_s: np.ndarray, mode: str = "same"
         report.append(info)
     if mode == "off":   # the sections are reported, nothing is asked of the dance
         return no_plan(len(grid), mode, tuple(report))
-    return FormPlan(mode, source, fresh, start, tuple(report), entry)
+    return FormPlan(mode, source, fresh, start, tuple(report), entry, hops % 2 == 1)
 
 
 def bar_pairs(form: SongStructure, mode: str, vary: float) -> np.ndarray:
