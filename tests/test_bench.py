@@ -258,10 +258,12 @@ def test_form_scores_each_engine_with_and_without_the_song_form(bench):
     if "skipped" in result["form"]:
         pytest.skip(result["form"]["skipped"])
     form = result["form"]
-    assert set(form["summary"]) == {"streaming/off", "streaming/same", "random_walk/off"}
+    assert set(form["summary"]) == {"streaming/off", "streaming/same", "random_walk/off", "random_walk/same"}
     same, off = form["summary"]["streaming/same"], form["summary"]["streaming/off"]
     assert same["replayed_share"] >= 0.8 and off["replayed_share"] is None
     assert same["form_score"] > same["form_chance"] + 0.2 and same["form_score"] > off["form_score"] + 0.2
+    walk, replayed = form["summary"]["random_walk/off"], form["summary"]["random_walk/same"]
+    assert replayed["form_score"] > walk["form_score"] + 0.2   # exact replays of the walk follow the form
     song = form["songs"][0]
     assert song["sections_true"] == "VVBV" and 0 <= song["boundary_f"] <= 1
     assert song["live"]["live_replayed_share"] is not None

@@ -85,6 +85,7 @@ class BenchConfig:
     # 10. The song's form (bench.form): sections found, and every engine with --repeat off and same.
     form_engines: tuple[str, ...] = ("streaming", "global", "choreography", "neural", "random_walk")
     form_specs: tuple | None = None      # SongSpecs of known form (None: groundtruth.structure_specs of the split)
+    form_seeds: tuple = (None, 1, 2)     # each song danced with each seed (None: the default dance)
 
     @classmethod
     def full(cls) -> "BenchConfig":
@@ -98,7 +99,7 @@ class BenchConfig:
                        groundtruth_quick=True, structure_songs=(DEFAULT_SONG,), structure_seeds=1, fig12_seeds=2,
                        fig12_song=DEFAULT_SONG, recreate_clips=4, accent_songs=(DEFAULT_SONG,),
                        realism_songs=(DEFAULT_SONG,), realism_seeds=1, vocabulary_long_songs=4,
-                       form_specs=tuple(_quick_form_specs()))
+                       form_specs=tuple(_quick_form_specs()), form_seeds=(None,))
 
 
 def _quick_form_specs():

@@ -199,8 +199,14 @@ def _form_music(key: str):
 
 
 def _lowest_same(key: str):
-    """The lowest mean of ``key`` over the engines dancing with ``--repeat same``."""
-    return lambda s: min(v[key] for k, v in s["summary"].items() if k.endswith("/same"))
+    """The lowest mean of ``key`` over the engines dancing with ``--repeat same`` (not the walk replayed)."""
+    return lambda s: min(v[key] for k, v in s["summary"].items() if k.endswith("/same") and k != "random_walk/same")
+
+
+def _form_ratio(key: str, combine):
+    """``combine`` (min, max) over the engines of the mean ``key`` with ``--repeat same`` over that with ``off``."""
+    return lambda s: combine(v[key] / s["summary"][k.replace("/same", "/off")][key] for k, v in s["summary"].items()
+                             if k.endswith("/same") and k != "random_walk/same")
 
 
 def _accent(subset: str, engine: str, key: str):
@@ -338,6 +344,8 @@ TARGETS = {
         ("structure consistency (music vs dance bars), every engine with --repeat same, lowest mean",
          "form_score", 0.5),
         ("paired beats danced as their pair, --repeat same, every engine, lowest", "replayed_share", 0.8))},
+    "Div_k with --repeat same / off, every engine, lowest": ("form", _form_ratio("div_k", min), 0.9, "at least"),
+    "FID_k with --repeat same / off, every engine, highest": ("form", _form_ratio("fid_k", max), 1.0),
 }
 
 
