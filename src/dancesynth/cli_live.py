@@ -15,8 +15,12 @@ from .defaults import DEFAULT_FPS, SEGMENT_S
 
 @click.command()
 @click.argument("source")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=Path("live.bvh"),
-              show_default=True, help="BVH file that grows as the dance goes (a valid BVH after every segment).")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="BVH file that grows as the dance goes (a valid BVH after every segment); default live.bvh, "
+                   "none with --vmc unless given.")
+@click.option("--vmc", metavar="HOST:PORT",
+              help="Also send the dance live over the VMC protocol to an avatar app (VSeeFace, VNyan, Warudo, "
+                   "3tene, VirtualMotionCapture, EVMC4U...): usually 127.0.0.1:39539.")
 @click.option("--segment-seconds", type=float, default=SEGMENT_S, show_default=True, help="Length of a segment.")
 @click.option("--style", help="Style or genre to dance (default: chosen from the first segment's tempo).")
 @click.option("--fps", type=float, default=DEFAULT_FPS, show_default=True, help="Frame rate of the output.")
@@ -32,19 +36,29 @@ from .defaults import DEFAULT_FPS, SEGMENT_S
 @click.option("--fast", is_flag=True, help="Read a file as fast as it decodes instead of at real-time pace.")
 @character_options
 @click.option("-q", "--quiet", is_flag=True, help="Only the summary, no line per segment.")
-def stream(source, output, segment_seconds, style, fps, seed, database, follow_signature, repeat, vary, fast,
+def stream(source, output, vmc, segment_seconds, style, fps, seed, database, follow_signature, repeat, vary, fast,
            character, bone_map, quiet):
     """Dance to SOURCE as it arrives: an audio file (played at real-time pace), '-' for standard input,
     or an http(s) URL of an audio stream. Motion is synthesised segment by segment (Xu et al.'s double
-    buffer) and appended to the BVH as it goes."""
-    from .live.output import CompleteBVHWriter
+    buffer) and appended to the BVH as it goes, and with --vmc sent to an avatar app as it plays."""
+    from .live.output import LiveSinks
     from .live.runtime import LiveConfig, run_live
     from .live.sources import AudioSource, broke_off
 
     from .retarget import SOURCE, SegmentRetargeter
     from .retarget.character import DEFAULT_CHARACTER, load_character
 
-    bvh_output(output)
+    if output is None and vmc is None:
+        output = Path("live.bvh")
+    if output is not None:
+        bvh_output(output)
+    address = None
+    if vmc is not None:
+        from .live.vmc import parse_address
+
+        address = parse_address(vmc)
+        if (character or DEFAULT_CHARACTER) == SOURCE:
+            raise InputError("--vmc sends a humanoid avatar's bones: leave out --character source")
     if (character or DEFAULT_CHARACTER) == SOURCE:
         on_character = None
     else:
@@ -59,10 +73,9 @@ def stream(source, output, segment_seconds, style, fps, seed, database, follow_s
 
     config = LiveConfig(segment_s=segment_seconds, style=style, fps=fps, seed=seed, database=database,
                         follow_signature=follow_signature, repeat=repeat, vary=vary)
-    with AudioSource(source, realtime=not fast) as src, CompleteBVHWriter(output) as writer:
-        sink = writer.append if on_character is None else (
-            lambda clip: writer.append(on_character.character.in_own_units(on_character(clip))))
-        summary = run_live(src, sink, config=config, on_report=report, realtime=not fast)
+    with AudioSource(source, realtime=not fast) as src, LiveSinks(output, address, on_character, fps,
+                                                                           segment_seconds) as sinks:
+        summary = run_live(src, sinks.append, config=config, on_report=report, realtime=not fast)
     if summary["frames"] == 0:
         raise InputError(f"{source}: the stream ended before a single segment could be danced")
     died = broke_off(src)
@@ -82,9 +95,15 @@ def stream(source, output, segment_seconds, style, fps, seed, database, follow_s
             else ""
         click.echo(f"form      {heard}; {form['replay_beats']} beats replayed{share}; sections heard at bars "
                    + " ".join(str(b + 1) for b in form["section_bars"]))
-    click.echo(f"wrote     {output} ({summary['frames']} frames at {fps:g} fps)")
+    if sinks.vmc is not None:
+        v = sinks.vmc.stats()
+        click.echo(f"vmc       {v['bundles']} frames sent to {vmc} ({v['on_time']:.1%} within a frame of their time, "
+                   f"{v['held']} held while a segment was late, {v['lost']} lost by the socket"
+                   + (f", {v['skipped']} skipped while the sender was held up" if v["skipped"] else "") + ")")
+    if output is not None:
+        click.echo(f"wrote     {output} ({summary['frames']} frames at {fps:g} fps)")
     if died:  # the BVH is complete up to there; the user must still learn that the source died
-        raise InputError(f"{died}; {output} holds the dance up to then")
+        raise InputError(f"{died}" + (f"; {output} holds the dance up to then" if output is not None else ""))
 
 
 @click.command()

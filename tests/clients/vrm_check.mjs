@@ -4,7 +4,10 @@
 //
 // Run by tests/test_vrm.py as
 //     node tests/clients/vrm_check.mjs OUT_DIR ANIMATION.vrma TIMES AVATAR.vrm[,AVATAR.vrm...] [CHROMIUM]
-// TIMES: comma-separated seconds. A VRM 0.x avatar is turned to face +Z as apps do (VRMUtils.rotateVRM0).
+// TIMES: comma-separated seconds. ANIMATION may instead be POSES.json, {time: {bone: {rotation, position}}}:
+// VRM normalized poses as a VMC-to-page bridge gives them (tests/test_vmc.py), each set with
+// vrm.humanoid.setNormalizedPose at its time; the hips' position is where the hips are, the page
+// makes it relative to its avatar's rest, as setNormalizedPose takes it. A VRM 0.x avatar is turned to face +Z as apps do (VRMUtils.rotateVRM0).
 // Writes OUT_DIR/<avatar index>_<time index>.png and prints one JSON object on stdout:
 // {ok, errors, console, background,
 //  avatars: [{file, metaVersion, name, bones, duration, tracks, positions: {time: {bone: xyz}}}]}.
@@ -55,17 +58,30 @@ window.loadAvatar = async (url, animationUrl) => {
   if (!vrm) throw new Error(url + ': three-vrm found no VRM in it');
   if (vrm.meta.metaVersion === '0') VRMUtils.rotateVRM0(vrm);
   scene.add(vrm.scene);
-  const vrmAnimation = (await loader.loadAsync(animationUrl)).userData.vrmAnimations[0];
-  const clip = createVRMAnimationClip(vrmAnimation, vrm);
-  const mixer = new THREE.AnimationMixer(vrm.scene);
-  const action = mixer.clipAction(clip);
-  action.setLoop(THREE.LoopOnce, 1);
-  action.clampWhenFinished = true;
-  action.play();
   const bones = Object.keys(vrm.humanoid.humanBones).filter((b) => vrm.humanoid.getRawBoneNode(b));
+  let setTime, clip = { duration: null, tracks: [] };
+  if (animationUrl.endsWith('.json')) {
+    const poses = await (await fetch(animationUrl)).json();
+    const restHips = vrm.humanoid.normalizedRestPose.hips.position;
+    setTime = (t) => {
+      const pose = structuredClone(poses[String(t)]);
+      if (pose.hips && pose.hips.position) pose.hips.position = pose.hips.position.map((v, i) => v - restHips[i]);
+      vrm.humanoid.resetNormalizedPose();
+      vrm.humanoid.setNormalizedPose(pose);
+    };
+  } else {
+    const vrmAnimation = (await loader.loadAsync(animationUrl)).userData.vrmAnimations[0];
+    clip = createVRMAnimationClip(vrmAnimation, vrm);
+    const mixer = new THREE.AnimationMixer(vrm.scene);
+    const action = mixer.clipAction(clip);
+    action.setLoop(THREE.LoopOnce, 1);
+    action.clampWhenFinished = true;
+    action.play();
+    setTime = (t) => mixer.setTime(t);
+  }
   window.poseAt = (t) => {
-    mixer.setTime(t);
-    vrm.update(0);   // copies the normalized bones the clip drives onto the avatar's own bones
+    setTime(t);
+    vrm.update(0);   // copies the normalized bones the clip or pose drives onto the avatar's own bones
     scene.updateMatrixWorld(true);
     renderer.render(scene, camera);
     const positions = {};
@@ -80,7 +96,8 @@ window.loadAvatar = async (url, animationUrl) => {
 window.pageReady = true;
 </script></body></html>`;
 
-const files = { '/dance.vrma': animation };
+const animationPath = animation.endsWith('.json') ? '/dance.json' : '/dance.vrma';
+const files = { [animationPath]: animation };
 avatars.forEach((a, i) => { files[`/avatar${i}.vrm`] = a; });
 const TYPES = { '.js': 'text/javascript', '.mjs': 'text/javascript', '.json': 'application/json' };
 
@@ -113,7 +130,7 @@ try {
   await page.waitForFunction(() => window.pageReady === true);
   const canvas = page.locator('#view');
   for (let i = 0; i < avatars.length; i++) {
-    const info = await page.evaluate(([a, b]) => window.loadAvatar(a, b), [`/avatar${i}.vrm`, '/dance.vrma']);
+    const info = await page.evaluate(([a, b]) => window.loadAvatar(a, b), [`/avatar${i}.vrm`, animationPath]);
     const entry = { file: avatars[i], ...info, positions: {} };
     for (let k = 0; k < times.length; k++) {
       entry.positions[times[k]] = await page.evaluate((t) => window.poseAt(t), times[k]);

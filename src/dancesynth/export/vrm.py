@@ -15,6 +15,7 @@ the skinned glTF of ``export.gltf`` plus the VRM meta and humanoid bone table.
 from __future__ import annotations
 
 import copy
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -72,19 +73,33 @@ class GlbBuilder(GlbBlob):
         return b"".join(self.gltf.save_to_bytes())
 
 
-def vrma_bytes(clip: MotionClip, bones: dict[str, int]) -> bytes:
-    """``clip`` as the bytes of a ``.vrma``; ``bones`` maps VRM humanoid bone names to its joints, whose
-    zero rotation must be the VRM T-pose (every built-in rig's rest pose is)."""
-    import pygltflib as g
+@dataclass(frozen=True)
+class HumanoidTracks:
+    """A dance as VRM humanoid bones (parents first): each bone's rest translation from its nearest
+    humanoid parent (the hips': from the floor), the hips' position per frame, and each bone's rotation
+    per frame relative to that parent, in the VRM T-pose's frame (metres, Y up, facing +Z)."""
 
+    bones: tuple[str, ...]     # (B,) VRM humanoid bone names, the hips first
+    joints: tuple[int, ...]    # (B,) their joints in the clip's skeleton
+    parent: tuple[int, ...]    # (B,) index of each bone's humanoid parent (-1: the hips)
+    rest_local: np.ndarray     # (B, 3)
+    hips_pos: np.ndarray       # (F, 3)
+    rotations: np.ndarray      # (F, B, 4) (x, y, z, w), one hemisphere along time
+
+
+def humanoid_tracks(clip: MotionClip, bones: dict[str, int], *, what: str = "a VRM Animation") -> HumanoidTracks:
+    """``clip`` as ``HumanoidTracks``; ``bones`` maps VRM humanoid bone names to its joints, whose zero
+    rotation must be the VRM T-pose (every built-in rig's rest pose is). Players take each bone's rotation
+    relative to its nearest humanoid parent (three-vrm-animation does exactly that): joints between bones
+    (a CMU ``LHipJoint``) fold into the rotations instead of being dropped."""
     sk = clip.skeleton
     missing = [b for b in REQUIRED if b not in bones]
     if missing:
-        raise InputError(f"cannot write a VRM Animation: the rig has no {', '.join(missing)} bone")
+        raise InputError(f"cannot write {what}: the rig has no {', '.join(missing)} bone")
     joint_bone = {}
     for bone, j in bones.items():
         if not 0 <= j < sk.n_joints or j in joint_bone:
-            raise InputError(f"cannot write a VRM Animation: bone {bone} is joint {j}, which is missing or taken")
+            raise InputError(f"cannot write {what}: bone {bone} is joint {j}, which is missing or taken")
         joint_bone[j] = bone
     hips = bones["hips"]
     joints = sorted(joint_bone)   # parents come first, as in the skeleton
@@ -98,33 +113,41 @@ def vrma_bytes(clip: MotionClip, bones: dict[str, int]) -> bytes:
 
     up = {j: bone_parent(j) for j in joints}
     if up[hips] != -1 or any(up[j] < 0 for j in joints if j != hips):
-        raise InputError("cannot write a VRM Animation: every humanoid bone must be below the hips")
+        raise InputError(f"cannot write {what}: every humanoid bone must be below the hips")
     _, rest = fk(np.tile(IDENTITY, (sk.n_joints, 1)), sk.offsets[0], sk.offsets, sk.parents)
     floor = np.zeros(3)
     if rest[hips, 1] <= 1e-3:   # a BVH rig rooted at the origin (OFFSET 0 0 0): its floor is its lowest joint
         floor[1] = rest[:, 1].min()
     rest = rest - floor
     if rest[hips, 1] <= 1e-3:
-        raise InputError("cannot write a VRM Animation: the rig's rest pose must stand on the floor (y = 0) "
+        raise InputError(f"cannot write {what}: the rig's rest pose must stand on the floor (y = 0) "
                          "with the hips above it")
-
     g_rot, g_pos = clip_fk(clip)
-    g_pos = g_pos - floor
-    node_of = {j: k for k, j in enumerate(joints)}
-    nodes = [g.Node(name=sk.names[j], children=[node_of[c] for c in joints if up[c] == j],
-                    translation=[float(v) for v in (rest[j] - rest[up[j]] if j != hips else rest[j])])
-             for j in joints]
-    rotations = {j: g_rot[:, j] if j == hips else mul(inv(g_rot[:, up[j]]), g_rot[:, j]) for j in joints}
-    rotations = dict(zip(joints, np.moveaxis(one_hemisphere(np.stack([rotations[j] for j in joints], axis=1)), 1, 0)))
+    index = {j: k for k, j in enumerate(joints)}
+    local = np.stack([g_rot[:, j] if j == hips else mul(inv(g_rot[:, up[j]]), g_rot[:, j]) for j in joints], axis=1)
+    return HumanoidTracks(tuple(joint_bone[j] for j in joints), tuple(joints),
+                          tuple(-1 if j == hips else index[up[j]] for j in joints),
+                          np.array([rest[j] - rest[up[j]] if j != hips else rest[j] for j in joints]),
+                          g_pos[:, hips] - floor, one_hemisphere(local))
 
+
+def vrma_bytes(clip: MotionClip, bones: dict[str, int]) -> bytes:
+    """``clip`` as the bytes of a ``.vrma`` (``humanoid_tracks``: the bones' zero rotation must be the VRM T-pose)."""
+    import pygltflib as g
+
+    tracks = humanoid_tracks(clip, bones)
+    names = clip.skeleton.names
+    nodes = [g.Node(name=names[j], children=[c for c, p in enumerate(tracks.parent) if p == k],
+                    translation=[float(v) for v in tracks.rest_local[k]])
+             for k, j in enumerate(tracks.joints)]
     gltf = g.GLTF2(asset=g.Asset(version="2.0", generator="dancesynth"), scene=0,
-                   scenes=[g.Scene(name="dance", nodes=[node_of[hips]])], nodes=nodes,
+                   scenes=[g.Scene(name="dance", nodes=[0])], nodes=nodes,
                    extensionsUsed=["VRMC_vrm_animation"],
                    extensions={"VRMC_vrm_animation": {"specVersion": "1.0", "humanoid": {"humanBones": {
-                       joint_bone[j]: {"node": node_of[j]} for j in joints}}}})
+                       bone: {"node": k} for k, bone in enumerate(tracks.bones)}}}})
     out = GlbBuilder(gltf)
-    out.animation("dance", clip.fps, [(node_of[hips], "translation", g_pos[:, hips])]
-                  + [(node_of[j], "rotation", rotations[j]) for j in joints])
+    out.animation("dance", clip.fps, [(0, "translation", tracks.hips_pos)]
+                  + [(k, "rotation", tracks.rotations[:, k]) for k in range(len(tracks.bones))])
     return out.glb()
 
 

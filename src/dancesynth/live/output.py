@@ -1,4 +1,5 @@
-"""The growing BVH of a live dance, complete on disk after every segment whatever happens."""
+"""Where a live dance goes: the growing BVH, complete on disk after every segment whatever happens, and
+the VMC sender (``live.vmc``) that plays it to an avatar app."""
 
 from __future__ import annotations
 
@@ -37,3 +38,49 @@ class CompleteBVHWriter(BVHStreamWriter):
                 kept = "nothing was written"
             self._failed = InputError(f"cannot write {self.path}: {exc.strerror or exc}; {kept}")
             raise self._failed from None
+
+
+class LiveSinks:
+    """Each segment's clip to the BVH at ``output`` (None: no file) and to a VMC receiver at ``address``
+    ((host, port); None: none), on ``on_character`` (a ``SegmentRetargeter``; None: the dance's own rig)."""
+
+    def __init__(self, output, address, on_character, fps: float, segment_s: float):
+        self.on_character = on_character
+        self.segment_s = segment_s
+        self.writer = CompleteBVHWriter(output) if output is not None else None
+        self.vmc = None
+        if address is not None:
+            from .vmc import VmcSender
+
+            if on_character is None:
+                raise InputError("VMC sends a humanoid avatar's bones: dance on a character, not the source rig")
+
+            self.vmc = VmcSender(*address, fps)
+
+    def append(self, clip) -> None:
+        dressed = clip if self.on_character is None else self.on_character(clip)
+        if self.vmc is not None:   # first: the avatar must not wait for the disk
+            from .vmc import VmcFrames
+
+            if not self.vmc.log and not self.vmc.pushed:
+                # The first segment ends at the last beat the tracker was sure of, short of the segment's
+                # end; the next comes a whole segment later. Starting the clock the difference later keeps
+                # the avatar dancing on, not holding a pose at every segment.
+                self.vmc.margin_s += max(0.0, self.segment_s - clip.n_frames / clip.fps)
+            self.vmc.push(VmcFrames.of(dressed, self.on_character.character.bones))
+        if self.writer is not None:
+            self.writer.append(dressed if self.on_character is None else
+                               self.on_character.character.in_own_units(dressed))
+
+    def __enter__(self):
+        if self.writer is not None:
+            self.writer.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        try:
+            if self.vmc is not None:
+                self.vmc.close(drain=exc[0] is None)
+        finally:
+            if self.writer is not None:
+                self.writer.__exit__(*exc)

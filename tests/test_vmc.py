@@ -1,0 +1,191 @@
+"""The live dance over the VMC protocol, as an avatar app receives it (a receiver written from the spec)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import BUNDLED_MUSIC
+from test_gltf_character import CLIENTS
+from dancesynth.errors import InputError
+from dancesynth.io.bvh import read_bvh
+from dancesynth.export.vrm import humanoid_tracks
+from dancesynth.kinematics import clip_fk
+from dancesynth.live.vmc import VmcFrames, VmcSender, parse_address, to_unity, unity_bone_name
+from dancesynth.live.vmc_receiver import VmcReceiver, world_positions
+from test_cli import assert_clean_failure, run
+
+
+@pytest.fixture(scope="module")
+def mannequin_dance(bundled_db):
+    """A second and a half of captured dance on the default character, with its humanoid bones."""
+    from dancesynth.retarget import on_character
+    from dancesynth.retarget.character import load_character
+
+    style = bundled_db.styles[sorted(bundled_db.styles)[0]]
+    character = load_character("mannequin")
+    src = style.clip(0)
+    clip, _ = on_character(src.frames(0, int(1.5 * src.fps)), character)
+    return clip, character
+
+
+def _truth(clip, bones):
+    """(F, B, 3) every humanoid bone's position by our forward kinematics, hips-first as sent, in Unity's frame."""
+    tracks = humanoid_tracks(clip, bones)
+    _, g_pos = clip_fk(clip)
+    at = g_pos[:, list(tracks.joints)]
+    at = at - at[:, :1] + tracks.hips_pos[:, None]     # the floor as the hips' track has it
+    return to_unity(at, np.tile([0.0, 0.0, 0.0, 1.0], at.shape[:2] + (1,)))[0], tracks
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_receiver_rebuilds_every_frame_as_our_kinematics_says(mannequin_dance):
+    clip, character = mannequin_dance
+    frames = VmcFrames.of(clip, character.bones)
+    truth, tracks = _truth(clip, character.bones)
+    assert {"Hips", "Spine", "Head", "LeftUpperArm", "RightLowerLeg"} <= set(frames.names)
+    with VmcReceiver() as rx:
+        with VmcSender("127.0.0.1", rx.port, clip.fps) as tx:
+            half = clip.n_frames // 2          # two segments, both there before they are due: nothing held
+            tx.push(VmcFrames(frames.names, frames.pos[:half], frames.rot[:half]))
+            tx.push(VmcFrames(frames.names, frames.pos[half:], frames.rot[half:]))
+        assert rx.wait_for(clip.n_frames, 5.0)
+    assert [s for s, *_ in tx.log] == list(range(clip.n_frames)) and tx.held == 0
+    got = rx.frames
+    assert len(got) == clip.n_frames
+    assert np.all(np.diff([f.t for f in got]) > 0)                      # in order
+    assert all(f.ok == 1 and f.root == ("root", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0) for f in got)
+    err = max(np.abs(world_positions(f, frames.names, tracks.parent) - truth[k]).max() for k, f in enumerate(got))
+    assert err < 1e-4, err
+
+
+def test_a_late_segment_holds_the_pose_then_blends_back_onto_the_music(mannequin_dance):
+    clip, character = mannequin_dance
+    frames = VmcFrames.of(clip, character.bones)
+    truth, tracks = _truth(clip, character.bones)
+    first = 20
+    with VmcReceiver() as rx:
+        with VmcSender("127.0.0.1", rx.port, clip.fps, margin_s=0.0) as tx:
+            tx.push(VmcFrames(frames.names, frames.pos[:first], frames.rot[:first]))
+            time.sleep(first / clip.fps + 0.7)   # the next segment comes 0.7 s late
+            tx.push(VmcFrames(frames.names, frames.pos[first:], frames.rot[first:]))
+        rx.wait_for(len(tx.log), 5.0)
+    shown = [s for s, *_ in tx.log]
+    assert tx.held > 0 and shown[first] == -1                          # held, not frozen into a gap
+    resumed = next(s for s in shown[first:] if s >= 0)
+    assert resumed > first + 10                                        # back on the frame the music is at
+    shown_frames = [s for s in shown if s >= 0]
+    assert shown_frames == sorted(set(shown_frames))                   # never backwards, never twice
+    pos = np.array([world_positions(f, frames.names, tracks.parent) for f in rx.frames])
+    step = np.abs(np.diff(pos, axis=0)).max(axis=(1, 2))
+    jump = np.abs(truth[resumed] - truth[first - 1]).max()             # what cutting over would have shown
+    natural = np.abs(np.diff(truth, axis=0)).max()
+    assert jump > 2 * natural                                          # (a cut would be seen)
+    assert step.max() < max(0.5 * jump, 1.5 * natural)
+
+
+def test_nobody_listening_costs_the_dance_nothing(mannequin_dance):
+    clip, character = mannequin_dance
+    frames = VmcFrames.of(clip, character.bones)
+    with VmcSender("127.0.0.1", _free_udp_port(), clip.fps, margin_s=0.0) as tx:
+        tx.push(VmcFrames(frames.names, frames.pos[:15], frames.rot[:15]))
+    assert len(tx.log) == 15 and [s for s, *_ in tx.log] == list(range(15))
+
+
+def test_unity_names_and_addresses():
+    assert unity_bone_name("leftUpperArm") == "LeftUpperArm" and unity_bone_name("upperChest") == "UpperChest"
+    assert [unity_bone_name(f"rightThumb{p}") for p in ("Metacarpal", "Proximal", "Distal")] == \
+        ["RightThumbProximal", "RightThumbIntermediate", "RightThumbDistal"]
+    assert parse_address("127.0.0.1:39540") == ("127.0.0.1", 39540)
+    assert parse_address("localhost") == ("localhost", 39539)
+    for bad in ("127.0.0.1:0", "127.0.0.1:99999", "127.0.0.1:port", "no-such-host.invalid:39539"):
+        with pytest.raises(InputError, match="--vmc"):
+            parse_address(bad)
+
+
+def test_stream_to_a_vmc_app(tmp_path):
+    song = tmp_path / "song.wav"
+    subprocess.run(["ffmpeg", "-loglevel", "error", "-y", "-t", "6", "-i",
+                    str(BUNDLED_MUSIC / "Kevin_MacLeod_-_Vibe_Ace.ogg"), "-ac", "1", str(song)], check=True)
+    with VmcReceiver() as rx:
+        proc = run("stream", song, "--fast", "-q", "--segment-seconds", "2", "--vmc", f"127.0.0.1:{rx.port}",
+                   cwd=tmp_path, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        rx.wait_for(150, 5.0)
+    assert "vmc       " in proc.stdout and "frames sent to" in proc.stdout, proc.stdout
+    assert not (tmp_path / "live.bvh").exists()                        # --vmc alone writes no file
+    assert len(rx.frames) >= 150 and {"Hips", "LeftHand", "Head"} <= set(rx.frames[-1].bones)
+    # Both at once: the BVH and the app.
+    with VmcReceiver() as rx:
+        proc = run("stream", song, "--fast", "-q", "--vmc", f"127.0.0.1:{rx.port}", "-o", tmp_path / "d.bvh",
+                   cwd=tmp_path, timeout=120)
+    assert proc.returncode == 0 and (tmp_path / "d.bvh").exists() and len(rx.frames) > 0, proc.stderr
+    # An app that is not listening costs the BVH nothing.
+    proc = run("stream", song, "--fast", "-q", "--vmc", f"127.0.0.1:{_free_udp_port()}", "-o", tmp_path / "e.bvh",
+               cwd=tmp_path, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert read_bvh(tmp_path / "e.bvh").n_frames == read_bvh(tmp_path / "d.bvh").n_frames
+    assert_clean_failure(run("stream", song, "--fast", "--vmc", "127.0.0.1:70000", "-o", tmp_path / "x.bvh"),
+                         tmp_path / "x.bvh", "--vmc")
+    assert_clean_failure(run("stream", song, "--fast", "--vmc", "127.0.0.1:39539", "--character", "source",
+                             "-o", tmp_path / "y.bvh"), tmp_path / "y.bvh", "--vmc")
+
+
+@pytest.mark.skipif(shutil.which("node") is None or not (CLIENTS / "node_modules" / "@pixiv" / "three-vrm").is_dir()
+                    or not Path("/usr/bin/chromium").exists(),
+                    reason="needs node, chromium and the npm clients (bash scripts/setup.sh --test installs them)")
+def test_three_vrm_fed_the_vmc_messages_poses_the_avatar_as_our_kinematics_and_our_vrma_do(tmp_path):
+    """The VMC bundles, received and bridged to a page (``vrm_pose``), pose pixiv's three-vrm avatar in headless
+    Chromium where our forward kinematics puts every bone, and look as the same dance played from our .vrma."""
+    from PIL import Image
+
+    from dancesynth.export.vrm import vrm_bytes, vrma_bytes
+    from dancesynth.live.vmc_receiver import vrm_pose
+    from dancesynth.retarget.mannequin import mannequin_character
+    from gltf_models import MANNEQUIN_BONES
+    from test_vrm import FRAMES, _lit_and_changed, mannequin_dance
+
+    dance = mannequin_dance()
+    avatar, animation, poses = tmp_path / "mannequin.vrm", tmp_path / "dance.vrma", tmp_path / "poses.json"
+    avatar.write_bytes(vrm_bytes(mannequin_character()))
+    animation.write_bytes(vrma_bytes(dance, MANNEQUIN_BONES))
+    frames = VmcFrames.of(dance, MANNEQUIN_BONES)
+    with VmcReceiver() as rx:
+        with VmcSender("127.0.0.1", rx.port, dance.fps, margin_s=0.0) as tx:
+            tx.push(frames)
+        assert rx.wait_for(dance.n_frames, 5.0)
+    assert tx.held == 0
+    times = [f"{f / dance.fps:.9g}" for f in FRAMES]
+    poses.write_text(json.dumps({t: vrm_pose(rx.frames[f]) for t, f in zip(times, FRAMES)}))
+    reports = {}
+    for name, source in (("vmc", poses), ("vrma", animation)):
+        out = tmp_path / name
+        out.mkdir()
+        proc = subprocess.run(["node", str(CLIENTS / "vrm_check.mjs"), str(out), str(source), ",".join(times),
+                               str(avatar), "/usr/bin/chromium"], capture_output=True, text=True, cwd=CLIENTS,
+                              timeout=240)
+        reports[name] = json.loads(proc.stdout)
+        assert reports[name]["ok"] and reports[name]["errors"] == [], reports[name]["errors"]
+    _, ours = clip_fk(dance)
+    entry = reports["vmc"]["avatars"][0]
+    for t, f in zip(times, FRAMES):
+        error = max(np.linalg.norm(np.array(entry["positions"][t][b]) - ours[f, j]) for b, j in MANNEQUIN_BONES.items())
+        assert error < 0.003, (f, error)                                   # metres
+    shots = {name: [tmp_path / name / f"0_{k}.png" for k in range(len(times))] for name in reports}
+    lit, changed = _lit_and_changed(shots["vmc"], np.array(reports["vmc"]["background"]))
+    assert min(lit) > 0.02 and min(changed) > 0.005                        # drawn, and moving
+    for a, b in zip(shots["vmc"], shots["vrma"]):                          # as the .vrma shows it
+        pa, pb = (np.asarray(Image.open(p).convert("RGB"), dtype=np.int16) for p in (a, b))
+        assert (np.abs(pa - pb).max(axis=2) > 12).mean() < 0.002
