@@ -2,7 +2,8 @@
 # Set up dancesynth on a fresh Debian/Ubuntu machine: system tools, a virtual environment, the package.
 #   bash scripts/setup.sh          # what `dancesynth dance`, `eval` and `bench` need
 #   bash scripts/setup.sh --test   # plus what the tests use (pytest, three.js, Blender for import checks,
-#                                  # Chromium + playwright-core for the web page)
+#                                  # Chromium + playwright-core for the web page, a PulseAudio server for
+#                                  # `stream system`)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 want_tests=0
@@ -11,7 +12,7 @@ want_tests=0
 # command:package pairs; only missing commands are installed
 # (fluidsynth renders the generated beat ground truth of `dancesynth bench`)
 needs="ffmpeg:ffmpeg ffprobe:ffmpeg fluidsynth:fluidsynth"
-[ $want_tests = 1 ] && needs="$needs blender:blender node:nodejs npm:npm chromium:chromium"
+[ $want_tests = 1 ] && needs="$needs blender:blender node:nodejs npm:npm chromium:chromium pulseaudio:pulseaudio"
 missing=""
 for pair in $needs; do
   command -v "${pair%%:*}" >/dev/null 2>&1 || missing="$missing ${pair##*:}"

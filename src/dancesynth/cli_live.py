@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import signal
 import sys
+import threading
 from pathlib import Path
 
 import click
@@ -39,8 +41,10 @@ from .defaults import DEFAULT_FPS, SEGMENT_S
 def stream(source, output, vmc, segment_seconds, style, fps, seed, database, follow_signature, repeat, vary, fast,
            character, bone_map, quiet):
     """Dance to SOURCE as it arrives: an audio file (played at real-time pace), '-' for standard input,
-    or an http(s) URL of an audio stream. Motion is synthesised segment by segment (Xu et al.'s double
-    buffer) and appended to the BVH as it goes, and with --vmc sent to an avatar app as it plays."""
+    an http(s) URL of an audio stream, 'system' (what this computer plays), 'mic' (its default input), or
+    pulse:NAME / alsa:NAME (a named sound source). Motion is synthesised segment by segment (Xu et al.'s
+    double buffer) and appended to the BVH as it goes, and with --vmc sent to an avatar app as it plays.
+    Ctrl-C ends the dance with the segment being heard (twice: at once)."""
     from .live.output import LiveSinks
     from .live.runtime import LiveConfig, run_live
     from .live.sources import AudioSource, broke_off
@@ -73,9 +77,21 @@ def stream(source, output, vmc, segment_seconds, style, fps, seed, database, fol
 
     config = LiveConfig(segment_s=segment_seconds, style=style, fps=fps, seed=seed, database=database,
                         follow_signature=follow_signature, repeat=repeat, vary=vary)
-    with AudioSource(source, realtime=not fast) as src, LiveSinks(output, address, on_character, fps,
-                                                                           segment_seconds) as sinks:
-        summary = run_live(src, sinks.append, config=config, on_report=report, realtime=not fast)
+    stop = threading.Event()
+
+    def on_interrupt(signum, frame):   # the first Ctrl-C ends the dance as the source's end would
+        if stop.is_set():
+            raise KeyboardInterrupt
+        stop.set()
+        click.echo("stopping: the dance ends with this segment (Ctrl-C again to quit at once)", err=True)
+
+    previous = signal.signal(signal.SIGINT, on_interrupt)
+    try:
+        with AudioSource(source, realtime=not fast) as src, LiveSinks(output, address, on_character, fps,
+                                                                               segment_seconds) as sinks:
+            summary = run_live(src, sinks.append, config=config, on_report=report, realtime=not fast, stop=stop)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     if summary["frames"] == 0:
         raise InputError(f"{source}: the stream ended before a single segment could be danced")
     died = broke_off(src)

@@ -1,4 +1,5 @@
-"""Audio that arrives over time: a file at real-time pace, standard input, an http(s) stream.
+"""Audio that arrives over time: a file at real-time pace, standard input, an http(s) stream, or
+the computer's own sound (``system``: what it plays; ``mic``: its default input).
 
 Every source is decoded by one ffmpeg process into mono 16-bit samples at the
 analysis rate; a reader thread turns its output into chunks on a bounded queue, so
@@ -8,7 +9,10 @@ does what it is good at: formats, resampling, pacing a file at its native rate
 standard input, so that its end can be judged by the container's own end mark (an Ogg
 stream's last page, a WAV's length) or the announced length: ffmpeg reports any http
 stream that closes without a length as an error, a finished one too. A connection that
-breaks is resumed with an HTTP Range request where the server accepts them.
+breaks is resumed with an HTTP Range request where the server accepts them. The computer's sound
+comes through ffmpeg's device inputs (``device_input``): on Linux the PulseAudio (or PipeWire's
+pulse) server's monitor of the default output and its default input; ``pulse:NAME`` and
+``alsa:NAME`` name a source or device.
 """
 
 from __future__ import annotations
@@ -45,6 +49,28 @@ TAIL_BYTES = 1 << 17
 # A broken http connection is resumed (HTTP Range) at most this often in a row, waiting up to this long.
 HTTP_RESUMES = 5
 HTTP_RESUME_WAIT_S = 4.0
+
+
+DEVICES = ("system", "mic")
+DEVICE_KINDS = ("pulse", "alsa")
+
+
+def device_input(spec: str) -> list[str] | None:
+    """ffmpeg's input arguments for a sound device: ``system`` (what the computer plays), ``mic`` (its
+    default input), ``pulse:NAME`` or ``alsa:NAME``; None for any other source. macOS reads a microphone
+    with AVFoundation and what it plays through a loopback device (BlackHole); Windows has no default
+    loopback that ffmpeg can name, so it gets the recipe of piping ffmpeg's dshow capture in."""
+    kind, _, name = spec.partition(":")
+    if kind in DEVICE_KINDS and name:
+        return ["-f", kind, "-i", name]
+    if spec not in DEVICES:
+        return None
+    if sys.platform == "darwin":
+        return ["-f", "avfoundation", "-i", ":default" if spec == "mic" else ":BlackHole 2ch"]
+    if sys.platform == "win32":
+        raise InputError(f"'{spec}' is not available on Windows: pipe a capture in, e.g. "
+                         "ffmpeg -f dshow -i audio=\"Stereo Mix (Realtek(R) Audio)\" -f wav - | dancesynth stream -")
+    return ["-f", "pulse", "-i", "@DEFAULT_MONITOR@" if spec == "system" else "default"]
 
 
 @dataclass(frozen=True)
@@ -84,7 +110,11 @@ class AudioSource:
         quick_probe = ["-probesize", "65536", "-analyzeduration", "500000"]
         self.network = spec.startswith(("http://", "https://"))
         self.path: Path | None = None
-        if spec == "-":
+        self.device = device_input(spec)
+        if self.device is not None:
+            # A device is live: no pacing; a small probe, so the first audio comes at once.
+            cmd += quick_probe + (["-fragment_size", "4096"] if self.device[1] == "pulse" else []) + self.device
+        elif spec == "-":
             cmd = [exe, "-hide_banner", "-loglevel", "error", *quick_probe, "-i", "pipe:0"]
             stdin = subprocess.PIPE  # fed by _pump, which skips junk before the container
         elif self.network:
@@ -97,7 +127,10 @@ class AudioSource:
                 raise InputError(f"{spec}: no such file (give an audio file, '-' for standard input, or an http(s) URL)")
             cmd += (["-re"] if realtime else []) + ["-i", str(self.path)]
         cmd += ["-vn", "-ac", "1", "-ar", str(sr), "-f", "s16le", "pipe:1"]
-        self._proc = subprocess.Popen(cmd, stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        # Its own process group: a Ctrl-C at the terminal is ours to handle (the dance ends cleanly), not ffmpeg's
+        # to die of; it still ends with us (its pipes close).
+        self._proc = subprocess.Popen(cmd, stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                      process_group=0)
         self._stderr_reader = threading.Thread(target=self._drain_stderr, daemon=True)
         self._stderr_reader.start()
         if spec == "-":
@@ -289,12 +322,27 @@ def wait_for_audio(source: AudioSource, timeout_s: float) -> Chunk:
             chunk = source.read(timeout=max(0.05, deadline - time.monotonic()))
         except StopIteration:
             why = f" ({source.error})" if source.error else ""
+            if source.device is not None:
+                raise InputError(f"{source.spec}: cannot capture from the sound device{why}; " + _device_help(source)) \
+                    from None
             raise InputError(f"{source.spec}: no audio could be decoded{why}; check that it plays "
                              "(e.g. ffplay), or convert it with ffmpeg") from None
         if chunk is not None and chunk.samples.size:
             return chunk
         if time.monotonic() >= deadline:
             raise InputError(f"{source.spec}: no audio arrived within {timeout_s:g} s")
+
+
+def _device_help(source: AudioSource) -> str:
+    kind = source.device[1]
+    if kind == "pulse":
+        return ("dancesynth records through PulseAudio (or PipeWire's pulse server): is one running for this user "
+                "(pactl info)? Name another source with pulse:NAME (pactl list short sources), or an ALSA device "
+                "with alsa:NAME (arecord -L)")
+    if kind == "alsa":
+        return "name an ALSA capture device that exists (arecord -L)"
+    return ("on macOS, allow the terminal to use the microphone; for what the Mac plays, install a loopback "
+            "device named 'BlackHole 2ch' and send the output to it")
 
 
 def _is_container(head: bytes) -> bool:

@@ -249,6 +249,10 @@ class _RelaySource:
     def error(self) -> str:
         return self._source.error
 
+    @property
+    def device(self):
+        return self._source.device
+
     def read(self, timeout: float):
         try:
             chunk = self._source.read(timeout)
