@@ -108,3 +108,21 @@ def test_a_stall_is_danced_through_at_the_clocks_pace(song, clock, bundled_db):
         assert b.audio_end_s - a.audio_end_s == pytest.approx(SEGMENT_S, abs=0.15)
     total = summary["frames"] / summary["fps"]
     assert total == pytest.approx(16.0 + summary["silence_s"], abs=0.5)
+
+
+def test_the_first_motion_comes_within_two_seconds_then_whole_segments(song, clock, bundled_db):
+    source = ScriptedSource(song, clock)
+    clips, reports = [], []
+    summary = run_live(source, clips.append, config=LiveConfig(segment_s=5.0, database=bundled_db),
+                       on_report=reports.append, realtime=False)
+    first = reports[0]
+    assert first.audio_end_s <= 2.0        # cut after 1.8 s of audio (the wall time: benchmarks/live_bench.py)
+    assert first.motion_end_s > 0.5 and len(first.beat_times_s) >= 2              # a short first dance, on beats
+    for a, b in zip(reports, reports[1:-1]):
+        assert b.audio_end_s == pytest.approx(a.audio_end_s + 5.0, abs=0.11)       # then whole segments
+    for a, b in zip(reports, reports[1:]):
+        assert b.motion_start_s == pytest.approx(a.motion_end_s)                   # back to back
+    # Each later segment holds the beats heard up to the tracker's hindsight before its cut.
+    for r in reports[1:-1]:
+        assert r.audio_end_s - 1.5 - 0.7 <= r.beat_times_s[-1] <= r.audio_end_s - 1.5 + 0.05
+    assert summary["beat_delay_s_median"] is not None

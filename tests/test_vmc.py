@@ -189,3 +189,14 @@ def test_three_vrm_fed_the_vmc_messages_poses_the_avatar_as_our_kinematics_and_o
     for a, b in zip(shots["vmc"], shots["vrma"]):                          # as the .vrma shows it
         pa, pb = (np.asarray(Image.open(p).convert("RGB"), dtype=np.int16) for p in (a, b))
         assert (np.abs(pa - pb).max(axis=2) > 12).mean() < 0.002
+
+
+def test_latency_sets_the_segment_length_and_bad_values_are_clear_errors(tmp_path):
+    from dancesynth.cli_live import segment_length
+
+    assert segment_length(None, None) == 5.0 and segment_length(2.0, None) == 2.0
+    assert segment_length(None, 3.0) == pytest.approx(1.5)
+    out = tmp_path / "live.bvh"
+    song = BUNDLED_MUSIC / "Kevin_MacLeod_-_Vibe_Ace.ogg"
+    assert_clean_failure(run("stream", song, "--latency", "2", "-o", out), out, "--latency 2", "at least 2.5")
+    assert_clean_failure(run("stream", song, "--latency", "3", "--segment-seconds", "2", "-o", out), out, "not both")

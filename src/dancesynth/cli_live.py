@@ -12,7 +12,7 @@ import click
 from .cli_character import character_options
 from .cli_support import Progress, bvh_output
 from .errors import InputError
-from .defaults import DEFAULT_FPS, SEGMENT_S
+from .defaults import BEAT_LATENCY_S as LATENCY_S, DEFAULT_FPS, SEGMENT_S
 
 
 @click.command()
@@ -23,7 +23,11 @@ from .defaults import DEFAULT_FPS, SEGMENT_S
 @click.option("--vmc", metavar="HOST:PORT",
               help="Also send the dance live over the VMC protocol to an avatar app (VSeeFace, VNyan, Warudo, "
                    "3tene, VirtualMotionCapture, EVMC4U...): usually 127.0.0.1:39539.")
-@click.option("--segment-seconds", type=float, default=SEGMENT_S, show_default=True, help="Length of a segment.")
+@click.option("--segment-seconds", type=float, default=None, help=f"Length of a segment (default {SEGMENT_S:g}).")
+@click.option("--latency", type=float, default=None, metavar="SECONDS",
+              help="The longest wait from a beat heard to its move: shorter segments (each sees less music ahead "
+                   f"when its moves are chosen); the beat tracker's {LATENCY_S:g} s of hindsight plus a segment "
+                   f"of at least 1 s. Default: {SEGMENT_S:g} s segments.")
 @click.option("--style", help="Style or genre to dance (default: chosen from the first segment's tempo).")
 @click.option("--fps", type=float, default=DEFAULT_FPS, show_default=True, help="Frame rate of the output.")
 @click.option("--seed", type=int, default=None, help="Vary the dance between runs.")
@@ -38,8 +42,8 @@ from .defaults import DEFAULT_FPS, SEGMENT_S
 @click.option("--fast", is_flag=True, help="Read a file as fast as it decodes instead of at real-time pace.")
 @character_options
 @click.option("-q", "--quiet", is_flag=True, help="Only the summary, no line per segment.")
-def stream(source, output, vmc, segment_seconds, style, fps, seed, database, follow_signature, repeat, vary, fast,
-           character, bone_map, quiet):
+def stream(source, output, vmc, segment_seconds, latency, style, fps, seed, database, follow_signature, repeat, vary,
+           fast, character, bone_map, quiet):
     """Dance to SOURCE as it arrives: an audio file (played at real-time pace), '-' for standard input,
     an http(s) URL of an audio stream, 'system' (what this computer plays), 'mic' (its default input), or
     pulse:NAME / alsa:NAME (a named sound source). Motion is synthesised segment by segment (Xu et al.'s
@@ -52,6 +56,7 @@ def stream(source, output, vmc, segment_seconds, style, fps, seed, database, fol
     from .retarget import SOURCE, SegmentRetargeter
     from .retarget.character import DEFAULT_CHARACTER, load_character
 
+    segment_seconds = segment_length(segment_seconds, latency)
     if output is None and vmc is None:
         output = Path("live.bvh")
     if output is not None:
@@ -99,8 +104,10 @@ def stream(source, output, vmc, segment_seconds, style, fps, seed, database, fol
     click.echo(f"segments  {summary['segments']} of {segment_seconds:g} s, step median "
                f"{summary['step_s_median'] * 1e3:.1f} ms, max {summary['step_s_max'] * 1e3:.1f} ms, "
                f"{summary['late_segments']} late")
+    delays = (f"; a beat's move ready {summary['beat_delay_s_median']:.2f} s after the beat (median), at most "
+              f"{summary['beat_delay_s_max']:.2f} s" if summary["beat_delay_s_max"] is not None else "")
     click.echo(f"latency   first motion ready {summary['first_motion_ready_s']:.2f} s after start "
-               f"({summary['first_audio_s']:.2f} s of audio heard)"
+               f"({summary['first_audio_s']:.2f} s of audio heard){delays}"
                + (f"; {summary['silence_s']:.1f} s of stalls bridged" if summary["silence_s"] > 0 else ""))
     if summary["motif_chi2"] is not None:
         click.echo(f"motifs    chi2 to the genre template {summary['motif_chi2']:.3f}")
@@ -120,6 +127,18 @@ def stream(source, output, vmc, segment_seconds, style, fps, seed, database, fol
         click.echo(f"wrote     {output} ({summary['frames']} frames at {fps:g} fps)")
     if died:  # the BVH is complete up to there; the user must still learn that the source died
         raise InputError(f"{died}" + (f"; {output} holds the dance up to then" if output is not None else ""))
+
+
+def segment_length(segment_seconds: float | None, latency: float | None) -> float:
+    """The segment length ``stream`` dances with: given, or made from ``--latency``, or the default."""
+    if latency is None:
+        return SEGMENT_S if segment_seconds is None else segment_seconds
+    if segment_seconds is not None:
+        raise InputError("give --latency or --segment-seconds, not both (--latency sets the segment length)")
+    if not latency >= LATENCY_S + 1.0:   # NaN too
+        raise InputError(f"--latency {latency:g}: at least {LATENCY_S + 1.0:g} s (the beat tracker's "
+                         f"{LATENCY_S:g} s of hindsight and a segment of 1 s)")
+    return latency - LATENCY_S
 
 
 @click.command()

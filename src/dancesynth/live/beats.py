@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..beat_tracking import _dp, beat_local_score, metrical_level, tempo_curve
+from ..defaults import BEAT_LATENCY_S
 from ..errors import InputError
 from ..types import FALLBACK_BPM
 from ..music.beats import ONSET_LATENCY_S, TRAILING_BEAT_FRACTION, _peak_envelope, refine_beat_frames
@@ -53,7 +54,7 @@ from ..music.onset import ANALYSIS_SR, HOP_LENGTH, N_FFT, N_MELS, mel_filterbank
 FPS = ANALYSIS_SR / HOP_LENGTH
 # Beats are given once this far in the past (the latency). Mean F on the 25 generated songs:
 # updated every 5 s, 0.999 at 0-0.5 s, 1.000 from 1 s; every 0.1 s, 0.94/0.95/0.97/0.98/1.00 at 0.5/1/1.5/2/3 s.
-LATENCY_S = 1.5
+LATENCY_S = BEAT_LATENCY_S
 TIGHTNESS = 100.0
 MIN_WINDOW_S = 1.0      # less audio than this has no tempo to speak of (the first beats wait)
 # Silence: SILENCE_BELOW_LOUD_DB under the recent loud level (95th percentile of the

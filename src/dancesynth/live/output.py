@@ -46,27 +46,25 @@ class LiveSinks:
 
     def __init__(self, output, address, on_character, fps: float, segment_s: float):
         self.on_character = on_character
-        self.segment_s = segment_s
         self.writer = CompleteBVHWriter(output) if output is not None else None
         self.vmc = None
         if address is not None:
-            from .vmc import VmcSender
+            from .runtime import segment_lead_s
+            from .vmc import MARGIN_S, VmcSender
 
             if on_character is None:
                 raise InputError("VMC sends a humanoid avatar's bones: dance on a character, not the source rig")
 
-            self.vmc = VmcSender(*address, fps)
+            # The VMC clock starts when the next segment will be there before its first frame is due: the
+            # first segment (cut early, on beats up to the edge of what was heard) is followed a segment
+            # later by one whose beats end the beat tracker's hindsight before that edge.
+            self.vmc = VmcSender(*address, fps, margin_s=MARGIN_S + segment_lead_s(segment_s))
 
     def append(self, clip) -> None:
         dressed = clip if self.on_character is None else self.on_character(clip)
         if self.vmc is not None:   # first: the avatar must not wait for the disk
             from .vmc import VmcFrames
 
-            if not self.vmc.log and not self.vmc.pushed:
-                # The first segment ends at the last beat the tracker was sure of, short of the segment's
-                # end; the next comes a whole segment later. Starting the clock the difference later keeps
-                # the avatar dancing on, not holding a pose at every segment.
-                self.vmc.margin_s += max(0.0, self.segment_s - clip.n_frames / clip.fps)
             self.vmc.push(VmcFrames.of(dressed, self.on_character.character.bones))
         if self.writer is not None:
             self.writer.append(dressed if self.on_character is None else

@@ -30,9 +30,15 @@ from ..errors import InputError
 from ..motion.database import MotionDatabase, open_database
 from ..motion.motifs import chi2
 from ..types import DEFAULT_FPS, FALLBACK_BPM, SEGMENT_S, MotionClip, check_fps, check_seed
-from .beats import StreamingBeatTracker
+from .beats import LATENCY_S, StreamingBeatTracker
 from .form import LiveForm
 from .sources import AudioSource, wait_for_audio
+
+
+# The first segment: cut after this much audio, its beats taken up to the edge of what was heard (the
+# tracker's usual 1.5 s of hindsight waived once), so that the first motion is ready within 2 s; every
+# later segment is a whole ``segment_s`` of sure beats.
+FIRST_SEGMENT_S = 1.8
 
 
 @dataclass(frozen=True)
@@ -48,9 +54,12 @@ class LiveConfig:
     follow_signature: bool = False     # keep the genre's motif signature (engines/graph/signature.py)
     repeat: str = "off"                # the song's form, as heard (live/form.py): same, mirror, vary or off
     vary: float = 0.5
+    first_segment_s: float = FIRST_SEGMENT_S   # the first segment is cut this soon, on every beat heard so far
 
     def __post_init__(self):
         check_repeat(self.repeat, self.vary)
+        if not (np.isfinite(self.first_segment_s) and self.first_segment_s >= 1.0):
+            raise InputError(f"the first segment must be at least 1 s long, got {self.first_segment_s!r}")
         check_seed(self.seed)
         check_fps(self.fps)
 
@@ -133,7 +142,8 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
     futures = []
     prev_beat: float | None = None
     prev_bar = 0
-    next_cut = config.segment_s
+    next_cut = min(config.first_segment_s, config.segment_s)   # a short first segment, on unsure beats
+    waiting = None   # the beats of a first cut too short to start on, kept for the next try
     index = 0
     ended = False
     stalled = False
@@ -169,14 +179,20 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
                 futures.pop(0).result()  # a failed step (a full disk) ends the dance now, not at the source's end
             if not ended and heard_s < next_cut:
                 continue
-            update = tracker.flush() if ended else tracker.update()
+            starting = worker is None
+            update = tracker.flush() if ended else tracker.update(until_s=heard_s if starting else None)
             tempo = update.tempo_bpm or tempo
             beats = np.asarray(update.beat_times_s, dtype=np.float64)
             inten = np.asarray(update.intensity_db, dtype=np.float64)
             bars, metre = np.asarray(update.beat_in_bar, dtype=np.int64), update.beats_per_bar
+            if waiting is not None:
+                beats, inten, bars = (np.concatenate((a, b)) for a, b in zip(waiting, (beats, inten, bars)))
+                waiting = None
             next_cut = heard_s + config.segment_s
             if worker is None:
                 if beats.size < 2 and not ended:
+                    if starting:   # try again soon, with these beats
+                        waiting, next_cut = (beats, inten, bars), heard_s + 0.25
                     continue  # not enough beats yet to start: keep listening
                 if beats.size == 0:
                     break
@@ -238,12 +254,28 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
         "step_s_max": float(np.max(steps)) if steps else 0.0,
         "late_segments": sum(r.late for r in reports),
         "first_motion_ready_s": reports[0].ready_s if reports else None,
+        **beat_delays(reports),
         "first_audio_s": reports[0].audio_end_s if reports else None,
         "form": {**form.summary(), "bar_starts_s": form.bar_starts_s().tolist(),
                  **(form.plan.replayed(worker.state.danced) if worker else {}),
                  "beat_times_s": form.beat_times_s().tolist(),   # the beats danced, and the graph node of each
                  "danced": [] if worker is None else worker.state.danced.tolist()},
     }
+
+
+def segment_lead_s(segment_s: float, first_segment_s: float = FIRST_SEGMENT_S) -> float:
+    """How long after the first segment's frames the last of the next segment's can arrive, relative to their
+    place in the dance: a segment later, less the first one's length, plus the beat tracker's hindsight
+    that the first segment waived."""
+    return max(0.0, segment_s + LATENCY_S - min(first_segment_s, segment_s))
+
+
+def beat_delays(reports: list[SegmentReport]) -> dict:
+    """How long after a beat was heard its move was ready (the segment's ``ready_s`` less the beat's time), over
+    the segments after the first (whose beats were taken early): median and largest, in seconds."""
+    delays = [r.ready_s - t for r in reports[1:] for t in r.beat_times_s if t >= 0]
+    return {"beat_delay_s_median": float(np.median(delays)) if delays else None,
+            "beat_delay_s_max": float(np.max(delays)) if delays else None}
 
 
 def _signature(config: LiveConfig, db, style, graph):
