@@ -200,3 +200,15 @@ def test_latency_sets_the_segment_length_and_bad_values_are_clear_errors(tmp_pat
     song = BUNDLED_MUSIC / "Kevin_MacLeod_-_Vibe_Ace.ogg"
     assert_clean_failure(run("stream", song, "--latency", "2", "-o", out), out, "--latency 2", "at least 2.5")
     assert_clean_failure(run("stream", song, "--latency", "3", "--segment-seconds", "2", "-o", out), out, "not both")
+
+
+def test_the_avatar_dances_a_whole_number_of_bars_behind_the_music(mannequin_dance):
+    clip, character = mannequin_dance
+    frames = VmcFrames.of(clip, character.bones)
+    with VmcSender("127.0.0.1", _free_udp_port(), clip.fps, margin_s=0.5) as tx:
+        tx.push(VmcFrames(frames.names, frames.pos[:5], frames.rot[:5]))
+        heard_at = time.perf_counter() - 1.9          # the music began 1.9 s ago; bars of 1.6 s
+        tx.align(heard_at, 1.6)
+    bars = (tx.log[0][1] - heard_at) / 1.6
+    assert tx.delay_s == pytest.approx(tx.log[0][1] - heard_at) and abs(bars - round(bars)) < 1e-6
+    assert round(bars) == 2                            # the first bar line after the clock's own start (2.4 s)

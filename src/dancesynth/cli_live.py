@@ -74,6 +74,7 @@ def stream(source, output, vmc, segment_seconds, latency, style, fps, seed, data
         on_character = SegmentRetargeter(load_character(character or DEFAULT_CHARACTER, bone_map=bone_map))
 
     def report(r):
+        sinks.on_report(r)
         if not quiet:
             click.echo(f"segment {r.index + 1:3d}  heard {r.audio_end_s:7.2f} s  {r.beats:3d} beats  motion "
                        f"{r.motion_start_s:6.2f}-{r.motion_end_s:6.2f} s  step {r.process_s * 1e3:6.1f} ms "
@@ -120,7 +121,9 @@ def stream(source, output, vmc, segment_seconds, latency, style, fps, seed, data
                    + " ".join(str(b + 1) for b in form["section_bars"]))
     if sinks.vmc is not None:
         v = sinks.vmc.stats()
-        click.echo(f"vmc       {v['bundles']} frames sent to {vmc} ({v['on_time']:.1%} within a frame of their time, "
+        behind = f"{sinks.vmc.delay_s:.2f} s (whole bars) behind" if sinks.vmc.delay_s is not None else "behind"
+        click.echo(f"vmc       the avatar danced {behind} the music; "
+                   f"{v['bundles']} frames sent to {vmc} ({v['on_time']:.1%} within a frame of their time, "
                    f"{v['held']} held while a segment was late, {v['lost']} lost by the socket"
                    + (f", {v['skipped']} skipped while the sender was held up" if v["skipped"] else "") + ")")
     if output is not None:

@@ -19,6 +19,14 @@ class CompleteBVHWriter(BVHStreamWriter):
         self._complete_bytes = 0
         self._failed: InputError | None = None
 
+    def on_report(self, report) -> None:
+        """After a segment's frames (``runtime.SegmentReport``): keep the VMC clock a whole number of bars behind the
+        music heard (``VmcSender.align``), at the tempo and metre heard so far."""
+        if self.vmc is not None and report.tempo_bpm > 0:
+            import time
+
+            self.vmc.align(time.perf_counter() - report.ready_s, 60.0 / report.tempo_bpm * report.beats_per_bar)
+
     def append(self, clip) -> None:
         if self._failed is not None:  # a segment queued behind the failed one: the file stays as it was cut
             raise self._failed
@@ -59,6 +67,14 @@ class LiveSinks:
             # first segment (cut early, on beats up to the edge of what was heard) is followed a segment
             # later by one whose beats end the beat tracker's hindsight before that edge.
             self.vmc = VmcSender(*address, fps, margin_s=MARGIN_S + segment_lead_s(segment_s))
+
+    def on_report(self, report) -> None:
+        """After a segment's frames (``runtime.SegmentReport``): keep the VMC clock a whole number of bars behind the
+        music heard (``VmcSender.align``), at the tempo and metre heard so far."""
+        if self.vmc is not None and report.tempo_bpm > 0:
+            import time
+
+            self.vmc.align(time.perf_counter() - report.ready_s, 60.0 / report.tempo_bpm * report.beats_per_bar)
 
     def append(self, clip) -> None:
         dressed = clip if self.on_character is None else self.on_character(clip)

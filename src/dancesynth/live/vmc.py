@@ -42,6 +42,7 @@ DEFAULT_PORT = 39539
 BLEND_S = 0.25           # from a held pose back into the dance (a late segment)
 MARGIN_S = 0.2          # the clock starts this long after the first frames: the next segment's synthesis
                         # may take longer than the first's without the avatar holding a pose
+SLEW = 0.03             # the clock moves toward the music's bar lines by at most this share of each frame
 LOG_S = 600.0            # the send log kept (a long stream's counts stay in ``stats``)
 QUEUE_S = 600.0          # frames kept waiting at most (a file read faster than real time: the oldest go)
 
@@ -160,6 +161,10 @@ class VmcSender:
         self._base = 0                    # index of self._pos[0]
         self._closing = False
         self._abort = False
+        self._start: float | None = None  # when frame 0 is due (time.perf_counter)
+        self._target: float | None = None  # where ``align`` wants the start, slewed to a frame at a time
+        self._earliest: float | None = None  # the delay the clock first started with (the least it may have)
+        self.delay_s: float | None = None  # after ``align``: how far behind the music the avatar dances
         self.log: deque[tuple[int, float, float]] = deque(maxlen=int(LOG_S * fps))
         self.bundles = self.on_time = 0   # bundles sent; those sent within a frame period of their time
         self.dropped = 0                  # bundles the socket refused
@@ -184,7 +189,31 @@ class VmcSender:
                 self._base += cut
         if not self._started:
             self._started = True
+            with self._lock:
+                if self._start is None:
+                    self._start = time.perf_counter() + self.margin_s
             self._thread.start()
+
+    def align(self, audio_start: float, bar_s: float) -> None:
+        """Keep the avatar a whole number of bars behind the music: the dance's 0 s is the music's 0 s, heard at
+        ``audio_start`` (``time.perf_counter``), and a bar lasts ``bar_s`` at the tempo heard so far. A move made
+        for a beat (a downbeat) is then shown as a beat (a downbeat) is heard. Before the first frame the
+        clock's start moves to the next bar line after it; later, as the tempo heard is known better, the
+        clock slews toward the nearest bar line (at most ``SLEW`` of a frame period a frame: a few per cent
+        faster or slower, never a jump), never earlier than it first started."""
+        with self._lock:
+            start = self._start if self._start is not None else time.perf_counter() + self.margin_s
+            if not bar_s > 0:
+                return
+            if self._earliest is None:
+                self._earliest = start - audio_start
+            bars = max(np.ceil(self._earliest / bar_s - 1e-9), np.round((start - audio_start) / bar_s))
+            target = audio_start + float(bars) * bar_s
+            if not self.bundles and start > time.perf_counter():
+                self._start = target
+            else:
+                self._target = target
+            self.delay_s = target - audio_start
 
     def close(self, drain: bool = True) -> None:
         """Stop once every pushed frame went out (``drain``), or at once (an interrupted stream)."""
@@ -208,12 +237,16 @@ class VmcSender:
         self.close(drain=exc_type is None)
 
     def _run(self) -> None:
-        start = time.perf_counter() + self.margin_s
         index = tick = 0            # the next frame of the dance to show; the clock's frame count
         last = held = blend = None  # the pose shown last; the pose held while late; (pose, frame) blended from
         while True:
-            due = start + tick / self.fps
-            wait = due - time.perf_counter()
+            while True:   # (align may move the start later until the first frame is due: look again)
+                with self._lock:
+                    due = self._start + tick / self.fps
+                wait = due - time.perf_counter()
+                if wait <= 0 or self.bundles:
+                    break
+                time.sleep(min(wait, 0.05))
             if wait > 0:
                 time.sleep(wait)
             elif -wait >= 1.0 / self.fps:  # this thread was held up: skip to the frame due now, not a burst
@@ -244,6 +277,11 @@ class VmcSender:
                 held = held or last
                 (pos, rot), shown = held, -1
                 self.held += 1
+            with self._lock:
+                if self._target is not None:   # toward the bar line, a little each frame
+                    step = np.clip(self._target - self._start, -SLEW / self.fps, SLEW / self.fps)
+                    self._start += float(step)
+                    self._target = None if self._start == self._target else self._target
             self._send(pos, rot, tick / self.fps)
             sent = time.perf_counter()
             self.log.append((shown, due, sent))
