@@ -2,7 +2,8 @@
 
 The main thread reads audio and feeds the streaming beat tracker; every
 ``segment_s`` of audio it cuts a ``MusicSegment`` from the beats the tracker has
-made final and hands it to one worker thread, which runs the engine's pure
+made final (the first one early, after ``first_segment_s``, on every beat heard so far,
+so that the dance starts within 2 s) and hands it to one worker thread, which runs the engine's pure
 ``step`` and passes the frames to a sink. Steps run in order on that one worker,
 so the engine's state never needs a lock; reading never waits for synthesis.
 
@@ -36,8 +37,8 @@ from .sources import AudioSource, wait_for_audio
 
 
 # The first segment: cut after this much audio, its beats taken up to the edge of what was heard (the
-# tracker's usual 1.5 s of hindsight waived once), so that the first motion is ready within 2 s; every
-# later segment is a whole ``segment_s`` of sure beats.
+# tracker's usual 1.5 s of hindsight waived once), so that the first motion is ready within 2 s; the
+# later cuts keep to the ``segment_s`` grid, on sure beats.
 FIRST_SEGMENT_S = 1.8
 
 
@@ -179,8 +180,7 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
                 futures.pop(0).result()  # a failed step (a full disk) ends the dance now, not at the source's end
             if not ended and heard_s < next_cut:
                 continue
-            starting = worker is None
-            update = tracker.flush() if ended else tracker.update(until_s=heard_s if starting else None)
+            update = tracker.flush() if ended else tracker.update(until_s=heard_s if worker is None else None)
             tempo = update.tempo_bpm or tempo
             beats = np.asarray(update.beat_times_s, dtype=np.float64)
             inten = np.asarray(update.intensity_db, dtype=np.float64)
@@ -188,12 +188,14 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
             if waiting is not None:
                 beats, inten, bars = (np.concatenate((a, b)) for a, b in zip(waiting, (beats, inten, bars)))
                 waiting = None
-            next_cut = heard_s + config.segment_s
+            # After the early first cut the cuts keep to the segment grid (a whole segment of audio each), as a
+            # stream without the early start would cut them.
+            next_cut = heard_s + config.segment_s if worker is not None or heard_s >= config.segment_s \
+                else config.segment_s
             if worker is None:
-                if beats.size < 2 and not ended:
-                    if starting:   # try again soon, with these beats
-                        waiting, next_cut = (beats, inten, bars), heard_s + 0.25
-                    continue  # not enough beats yet to start: keep listening
+                if beats.size < 2 and not ended:   # not enough beats yet to start: try again soon, with these
+                    waiting, next_cut = (beats, inten, bars), heard_s + 0.25
+                    continue
                 if beats.size == 0:
                     break
                 style, _ = choose_style(db, tempo if tempo > 0 else FALLBACK_BPM, config.style)
