@@ -212,3 +212,30 @@ def test_the_avatar_dances_a_whole_number_of_bars_behind_the_music(mannequin_dan
     bars = (tx.log[0][1] - heard_at) / 1.6
     assert tx.delay_s == pytest.approx(tx.log[0][1] - heard_at) and abs(bars - round(bars)) < 1e-6
     assert round(bars) == 2                            # the first bar line after the clock's own start (2.4 s)
+
+
+def test_a_full_socket_buffer_loses_bundles_never_the_dance(mannequin_dance):
+    """Every third send finds the socket's buffer full (EAGAIN): that bundle is lost and counted, the clock goes on."""
+    clip, character = mannequin_dance
+    frames = VmcFrames.of(clip, character.bones)
+
+    class FullEveryThird:
+        def __init__(self, sock):
+            self.sock, self.calls = sock, 0
+
+        def sendto(self, data, address):
+            self.calls += 1
+            if self.calls % 3 == 0:
+                raise BlockingIOError(11, "Resource temporarily unavailable")
+            return self.sock.sendto(data, address)
+
+        def close(self):
+            self.sock.close()
+
+    with VmcReceiver() as rx:
+        with VmcSender("127.0.0.1", rx.port, clip.fps, margin_s=0.0) as tx:
+            tx._sock = FullEveryThird(tx._sock)
+            tx.push(VmcFrames(frames.names, frames.pos[:30], frames.rot[:30]))
+        rx.wait_for(20, 5.0)
+    assert [s for s, *_ in tx.log] == list(range(30))          # every frame had its turn, in order
+    assert tx.stats()["lost"] == 10 and len(rx.frames) == 20   # the lost ones never arrived, the rest did
