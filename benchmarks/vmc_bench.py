@@ -33,13 +33,11 @@ SONG = REPO / "src" / "dancesynth" / "data" / "music" / "Kevin_MacLeod_-_Vibe_Ac
 
 
 def measure(seconds: float) -> dict:
-    from dancesynth.kinematics import clip_fk
     from dancesynth.live.output import LiveSinks
     from dancesynth.live.runtime import LiveConfig, run_live
     from dancesynth.live.sources import AudioSource
-    from dancesynth.live.vmc import to_unity, unity_bone_name
-    from dancesynth.live.vmc_receiver import VmcReceiver, world_positions
-    from dancesynth.export.vrm import humanoid_tracks
+    from dancesynth.live.vmc import VmcFrames
+    from dancesynth.live.vmc_receiver import VmcReceiver, expected_positions, world_positions
     from dancesynth.retarget import SegmentRetargeter
     from dancesynth.retarget.character import load_character
 
@@ -77,16 +75,13 @@ def measure(seconds: float) -> dict:
 
     whole = MotionClip(dressed[0].skeleton, dressed[0].fps, np.concatenate([c.root_pos for c in dressed]),
                        np.concatenate([c.local_rot for c in dressed]))
-    tracks = humanoid_tracks(whole, character.bones)
-    _, g_pos = clip_fk(whole)
-    at = g_pos[:, list(tracks.joints)]
-    truth = to_unity(at - at[:, :1] + tracks.hips_pos[:, None], np.zeros(at.shape[:2] + (4,)) + [0, 0, 0, 1])[0]
-    names = tuple(unity_bone_name(b) for b in tracks.bones)
+    truth, parent = expected_positions(whole, character.bones)
+    names = VmcFrames.of(whole.frames(0, 1), character.bones).names
     err, since_hold = 0.0, tx.blend + 1
     for k, s in enumerate(shown):
         since_hold = 0 if s < 0 else since_hold + 1
         if s >= 0 and since_hold > tx.blend and k in tick_of:
-            err = max(err, float(np.abs(world_positions(tick_of[k], names, tracks.parent) - truth[s]).max()))
+            err = max(err, float(np.abs(world_positions(tick_of[k], names, parent) - truth[s]).max()))
     ordered = [s for s in shown if s >= 0]
     return {"song": SONG.name, "seconds": seconds, "fps": tx.fps, "wall_s": wall,
             "first_motion_ready_s": summary["first_motion_ready_s"],

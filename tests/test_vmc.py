@@ -6,6 +6,7 @@ import json
 import shutil
 import socket
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -16,10 +17,9 @@ from conftest import BUNDLED_MUSIC
 from test_gltf_character import CLIENTS
 from dancesynth.errors import InputError
 from dancesynth.io.bvh import read_bvh
-from dancesynth.export.vrm import humanoid_tracks
 from dancesynth.kinematics import clip_fk
-from dancesynth.live.vmc import VmcFrames, VmcSender, parse_address, to_unity, unity_bone_name
-from dancesynth.live.vmc_receiver import VmcReceiver, world_positions
+from dancesynth.live.vmc import VmcFrames, VmcSender, parse_address, unity_bone_name
+from dancesynth.live.vmc_receiver import VmcReceiver, expected_positions, world_positions
 from test_cli import assert_clean_failure, run
 
 
@@ -36,15 +36,6 @@ def mannequin_dance(bundled_db):
     return clip, character
 
 
-def _truth(clip, bones):
-    """(F, B, 3) every humanoid bone's position by our forward kinematics, hips-first as sent, in Unity's frame."""
-    tracks = humanoid_tracks(clip, bones)
-    _, g_pos = clip_fk(clip)
-    at = g_pos[:, list(tracks.joints)]
-    at = at - at[:, :1] + tracks.hips_pos[:, None]     # the floor as the hips' track has it
-    return to_unity(at, np.tile([0.0, 0.0, 0.0, 1.0], at.shape[:2] + (1,)))[0], tracks
-
-
 def _free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
@@ -54,7 +45,7 @@ def _free_udp_port() -> int:
 def test_a_receiver_rebuilds_every_frame_as_our_kinematics_says(mannequin_dance):
     clip, character = mannequin_dance
     frames = VmcFrames.of(clip, character.bones)
-    truth, tracks = _truth(clip, character.bones)
+    truth, parent = expected_positions(clip, character.bones)
     assert {"Hips", "Spine", "Head", "LeftUpperArm", "RightLowerLeg"} <= set(frames.names)
     with VmcReceiver() as rx:
         with VmcSender("127.0.0.1", rx.port, clip.fps) as tx:
@@ -67,14 +58,14 @@ def test_a_receiver_rebuilds_every_frame_as_our_kinematics_says(mannequin_dance)
     assert len(got) == clip.n_frames
     assert np.all(np.diff([f.t for f in got]) > 0)                      # in order
     assert all(f.ok == 1 and f.root == ("root", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0) for f in got)
-    err = max(np.abs(world_positions(f, frames.names, tracks.parent) - truth[k]).max() for k, f in enumerate(got))
+    err = max(np.abs(world_positions(f, frames.names, parent) - truth[k]).max() for k, f in enumerate(got))
     assert err < 1e-4, err
 
 
 def test_a_late_segment_holds_the_pose_then_blends_back_onto_the_music(mannequin_dance):
     clip, character = mannequin_dance
     frames = VmcFrames.of(clip, character.bones)
-    truth, tracks = _truth(clip, character.bones)
+    truth, parent = expected_positions(clip, character.bones)
     first = 20
     with VmcReceiver() as rx:
         with VmcSender("127.0.0.1", rx.port, clip.fps, margin_s=0.0) as tx:
@@ -88,7 +79,7 @@ def test_a_late_segment_holds_the_pose_then_blends_back_onto_the_music(mannequin
     assert resumed > first + 10                                        # back on the frame the music is at
     shown_frames = [s for s in shown if s >= 0]
     assert shown_frames == sorted(set(shown_frames))                   # never backwards, never twice
-    pos = np.array([world_positions(f, frames.names, tracks.parent) for f in rx.frames])
+    pos = np.array([world_positions(f, frames.names, parent) for f in rx.frames])
     step = np.abs(np.diff(pos, axis=0)).max(axis=(1, 2))
     jump = np.abs(truth[resumed] - truth[first - 1]).max()             # what cutting over would have shown
     natural = np.abs(np.diff(truth, axis=0)).max()
@@ -239,3 +230,26 @@ def test_a_full_socket_buffer_loses_bundles_never_the_dance(mannequin_dance):
         rx.wait_for(20, 5.0)
     assert [s for s, *_ in tx.log] == list(range(30))          # every frame had its turn, in order
     assert tx.stats()["lost"] == 10 and len(rx.frames) == 20   # the lost ones never arrived, the rest did
+
+
+def test_vmc_listen_says_what_reaches_its_port(mannequin_dance, tmp_path):
+    clip, character = mannequin_dance
+    frames = VmcFrames.of(clip, character.bones)
+    port = _free_udp_port()
+    listener = subprocess.Popen([sys.executable, "-m", "dancesynth.cli", "vmc-listen", "--port", str(port),
+                                 "--seconds", "4"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert "listening on 127.0.0.1" in listener.stdout.readline()
+        with VmcSender("127.0.0.1", port, clip.fps, margin_s=0.0) as tx:
+            tx.push(frames)
+        stdout, stderr = listener.communicate(timeout=60)
+    finally:
+        listener.kill()
+    assert listener.returncode == 0, stderr
+    total = int(stdout.strip().splitlines()[-1].split()[0])
+    assert total == len(tx.log) and f"{len(frames.names)} bones, e.g. Hips" in stdout, stdout
+    # The port taken: a clear error.
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        busy = run("vmc-listen", "--port", taken.getsockname()[1], "--seconds", "1")
+    assert busy.returncode == 2 and "cannot listen" in busy.stderr and "Traceback" not in busy.stderr

@@ -13,7 +13,7 @@ import click
 from .cli_batch import batch
 from .cli_character import character_options, characters, on_dance_character, write_moved, write_on_character
 from .cli_dance import dance_config, dance_options, form_line
-from .cli_live import render, serve, stream
+from .cli_live import render, serve, stream, vmc_listen
 from .cli_support import Progress, writable, write_json
 from .defaults import DEFAULT_FPS
 from .errors import DanceSynthError, InputError
@@ -440,7 +440,7 @@ def conduct(song, output, character, bone_map, melody_track, rhythm_track, style
         click.echo("\n".join(summary_lines(clip.provenance.summary, output)))
 
 
-for _command in (stream, render, serve, characters, batch):  # in cli_live.py, cli_character.py, cli_batch.py
+for _command in (stream, render, serve, vmc_listen, characters, batch):  # in cli_live.py, cli_character.py, cli_batch.py
     cli.add_command(_command)
 
 

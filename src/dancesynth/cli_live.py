@@ -132,6 +132,41 @@ def stream(source, output, vmc, segment_seconds, latency, style, fps, seed, data
         raise InputError(f"{died}" + (f"; {output} holds the dance up to then" if output is not None else ""))
 
 
+@click.command("vmc-listen")
+@click.option("--port", type=click.IntRange(1, 65535), default=39539, show_default=True,
+              help="UDP port to listen on (127.0.0.1).")
+@click.option("--seconds", type=click.FloatRange(min=0.1), default=None,
+              help="Stop after this long (default: at Ctrl-C).")
+def vmc_listen(port, seconds):
+    """Listen for VMC messages on 127.0.0.1:PORT and say, once a second, what arrives: a check of what
+    `stream --vmc` (or any VMC sender) sends, without an avatar app."""
+    import time
+
+    from .live.vmc_receiver import VmcReceiver
+
+    try:
+        rx = VmcReceiver(port)
+    except OSError as exc:
+        raise InputError(f"cannot listen on 127.0.0.1:{port} ({exc.strerror or exc}); is an app using it?") from None
+    click.echo(f"listening on 127.0.0.1:{rx.port}; Ctrl-C to stop")
+    end = None if seconds is None else time.monotonic() + seconds
+    seen = 0
+    try:
+        while end is None or time.monotonic() < end:
+            time.sleep(1.0 if end is None else max(0.0, min(1.0, end - time.monotonic())))
+            n = len(rx.frames)
+            if n > seen:
+                last = rx.frames[-1]
+                click.echo(f"{n - seen} frames in the last second; t = {last.t:.2f} s, {len(last.bones)} bones, "
+                           f"e.g. {', '.join(list(last.bones)[:3])}")
+                seen = n
+    except KeyboardInterrupt:
+        pass
+    finally:
+        rx.close()
+    click.echo(f"{seen} frames in all")
+
+
 def segment_length(segment_seconds: float | None, latency: float | None) -> float:
     """The segment length ``stream`` dances with: given, or made from ``--latency``, or the default."""
     if latency is None:

@@ -79,7 +79,15 @@ def form_songs(cfg: BenchConfig, progress: Progress | None = None) -> list[dict]
              "sections": s.sections} for s in songs]
 
 
-def _dance(name: str, music, db, repeat: str, seed: int | None):
+def _walk_fit(music, db) -> tuple[str, int]:
+    """The style and metrical level the product dances ``music`` in: the random walk's, for a fair baseline."""
+    from ..api import dance
+
+    ours = dance(music, database=db, repeat="off")
+    return ours.provenance.style, ours.provenance.summary["subdivide"]
+
+
+def _dance(name: str, music, db, repeat: str, seed: int | None, walk_fit: tuple[str, int] | None):
     from ..api import dance
     from ..engines.beatgrid import beat_grid
     from ..engines.form import form_plan, replay_motion
@@ -87,9 +95,8 @@ def _dance(name: str, music, db, repeat: str, seed: int | None):
 
     if name != "random_walk":
         return dance(music, database=db, engine=name, repeat=repeat, seed=seed)
-    ours = dance(music, database=db, repeat="off")
-    sub = ours.provenance.summary["subdivide"]
-    walk = walk_dance(db.styles[ours.provenance.style], music, subdivide=sub, seed=seed or 0)
+    style, sub = walk_fit
+    walk = walk_dance(db.styles[style], music, subdivide=sub, seed=seed or 0)
     if repeat == "off":
         return walk
     grid = beat_grid(music, subdivide=sub).times_s
@@ -131,9 +138,10 @@ def form_section(cfg: BenchConfig, db, progress: Progress | None = None) -> dict
         if progress:
             progress(f"form: song {i + 1}/{len(songs)}: {song['name']}")
         rows = {}
+        walk_fit = _walk_fit(song["music"], db) if "random_walk" in cfg.form_engines else None
         for name in cfg.form_engines:
             for repeat in ("off", "same"):
-                runs = [_scores(_dance(name, song["music"], db, repeat, seed), song, db, refs) for seed in cfg.form_seeds]
+                runs = [_scores(_dance(name, song["music"], db, repeat, seed, walk_fit), song, db, refs) for seed in cfg.form_seeds]
                 rows[f"{name}/{repeat}"] = {**mean_scores(runs),
                                             "one_frame_steps": sum(r["one_frame_steps"] for r in runs)}
         music = song["music"]

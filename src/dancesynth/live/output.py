@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import time
 
 from ..errors import InputError
 from ..io.bvh_writer import BVHStreamWriter
@@ -23,8 +24,6 @@ class CompleteBVHWriter(BVHStreamWriter):
         """After a segment's frames (``runtime.SegmentReport``): keep the VMC clock a whole number of bars behind the
         music heard (``VmcSender.align``), at the tempo and metre heard so far."""
         if self.vmc is not None and report.tempo_bpm > 0:
-            import time
-
             self.vmc.align(time.perf_counter() - report.ready_s, 60.0 / report.tempo_bpm * report.beats_per_bar)
 
     def append(self, clip) -> None:
@@ -72,8 +71,6 @@ class LiveSinks:
         """After a segment's frames (``runtime.SegmentReport``): keep the VMC clock a whole number of bars behind the
         music heard (``VmcSender.align``), at the tempo and metre heard so far."""
         if self.vmc is not None and report.tempo_bpm > 0:
-            import time
-
             self.vmc.align(time.perf_counter() - report.ready_s, 60.0 / report.tempo_bpm * report.beats_per_bar)
 
     def append(self, clip) -> None:

@@ -32,8 +32,11 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
+from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
+from pythonosc.osc_message_builder import OscMessageBuilder
 
 from ..errors import InputError
 from ..rotations import nlerp
@@ -57,11 +60,16 @@ def unity_bone_name(vrm_bone: str) -> str:
     return vrm_bone[0].upper() + vrm_bone[1:]
 
 
-def vrm_bone_name(unity_bone: str) -> str | None:
-    """Unity ``HumanBodyBones`` name -> VRM 1.0 humanoid bone name (None: not a VRM bone)."""
+@lru_cache(maxsize=1)
+def _vrm_bones() -> dict[str, str]:
     from ..retarget.humanoid import BONES
 
-    return {unity_bone_name(b): b for b in BONES}.get(unity_bone)
+    return {unity_bone_name(b): b for b in BONES}
+
+
+def vrm_bone_name(unity_bone: str) -> str | None:
+    """Unity ``HumanBodyBones`` name -> VRM 1.0 humanoid bone name (None: not a VRM bone)."""
+    return _vrm_bones().get(unity_bone)
 
 
 def to_unity(pos: np.ndarray, rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -119,9 +127,6 @@ def parse_address(text: str) -> tuple[str, int]:
 
 def bundle(names: tuple[str, ...], pos: np.ndarray, rot: np.ndarray, t: float) -> bytes:
     """One frame's OSC bundle (the module's text lists what it holds)."""
-    from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
-    from pythonosc.osc_message_builder import OscMessageBuilder
-
     out = OscBundleBuilder(IMMEDIATELY)
 
     def message(address, *args):

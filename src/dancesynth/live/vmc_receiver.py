@@ -3,8 +3,8 @@
 It listens on a UDP port (python-osc's server), collects each frame's ``/VMC/Ext/Bone/Pos``
 messages until the frame's ``/VMC/Ext/T``, and rebuilds the avatar's pose as a receiver does: each
 bone's world transform is its parent's composed with the local position and rotation it was sent
-(in Unity's frame, as sent). ``dancesynth`` uses it in its tests and benchmark; a user can run it to
-see what reaches a port (``python -m dancesynth.live.vmc_receiver PORT``).
+(in Unity's frame, as sent). ``dancesynth`` uses it in its tests and benchmark, and ``dancesynth
+vmc-listen`` to show a user what reaches a port.
 """
 
 from __future__ import annotations
@@ -101,6 +101,21 @@ def vrm_pose(frame: VmcFrame) -> dict:
     return out
 
 
+def expected_positions(clip, bones: dict[str, int]) -> tuple[np.ndarray, tuple[int, ...]]:
+    """What a receiver should rebuild from ``VmcFrames.of(clip, bones)``: (F, B, 3) every humanoid bone's position
+    by our forward kinematics, in the order sent, in Unity's frame, and each bone's parent (as ``world_positions``
+    takes it)."""
+    from ..export.vrm import humanoid_tracks
+    from ..kinematics import clip_fk
+    from .vmc import to_unity
+
+    tracks = humanoid_tracks(clip, bones)
+    _, g_pos = clip_fk(clip)
+    at = g_pos[:, list(tracks.joints)]
+    at = at - at[:, :1] + tracks.hips_pos[:, None]     # the floor as the hips' track has it
+    return to_unity(at, np.zeros(at.shape[:2] + (4,)) + [0.0, 0.0, 0.0, 1.0])[0], tracks.parent
+
+
 def world_positions(frame: VmcFrame, names: tuple[str, ...], parent: tuple[int, ...]) -> np.ndarray:
     """(B, 3) each bone's position in the avatar's space (Unity's frame), from the local transforms
     ``frame`` holds, with the avatar's hierarchy: ``parent[k]`` the index in ``names`` of bone k's
@@ -116,22 +131,3 @@ def world_positions(frame: VmcFrame, names: tuple[str, ...], parent: tuple[int, 
             pos[k] = pos[parent[k]] + apply(rot[parent[k]], p)
             rot[k] = mul(rot[parent[k]], q)
     return pos
-
-
-if __name__ == "__main__":  # pragma: no cover - a user's look at a port
-    import sys
-
-    port = int(sys.argv[1]) if len(sys.argv) > 1 else 39539
-    with VmcReceiver(port) as rx:
-        print(f"listening on 127.0.0.1:{rx.port}; Ctrl-C to stop")
-        seen = 0
-        try:
-            while True:
-                time.sleep(1.0)
-                n = len(rx.frames)
-                if n > seen:
-                    last = rx.frames[-1]
-                    print(f"{n - seen} frames in the last second; t = {last.t:.2f} s, {len(last.bones)} bones")
-                    seen = n
-        except KeyboardInterrupt:
-            pass
