@@ -8,11 +8,13 @@ through the sink's monitor. Skipped, with the reason, where no PulseAudio server
 from __future__ import annotations
 
 import os
+import queue
 import re
 import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
@@ -45,37 +47,59 @@ def sound_server(tmp_path_factory):
     subprocess.run(["pulseaudio", "--kill"], env=env, capture_output=True, timeout=30)
 
 
-def _dance_while_a_song_plays(source: str, env, out, seconds: float) -> subprocess.CompletedProcess:
-    """``dancesynth stream SOURCE`` for ``seconds`` while the song plays into the default output at real-time
-    pace (as a media player does), then Ctrl-C: the dance ends with the segment being heard."""
-    player = subprocess.Popen(["ffmpeg", "-hide_banner", "-loglevel", "error", "-re", "-t", str(seconds + 10), "-i",
+def _dance_while_a_song_plays(source: str, env, out, segments: int) -> subprocess.CompletedProcess:
+    """``dancesynth stream SOURCE`` while the song plays into the default output at real-time pace (as a media
+    player does), until it has danced ``segments`` segments, then Ctrl-C: the dance ends with the segment being
+    heard. Bounded: a stream that dances nothing within a minute is stopped all the same."""
+    player = subprocess.Popen(["ffmpeg", "-hide_banner", "-loglevel", "error", "-re", "-t", "60", "-i",
                                str(VIBE_ACE), "-f", "pulse", "test player"], env=env, stdin=subprocess.DEVNULL)
+    lines: queue.Queue = queue.Queue()
     try:
         proc = subprocess.Popen([sys.executable, "-m", "dancesynth.cli", "stream", source, "-o", str(out),
-                                 "--segment-seconds", "3", "-q"], env=env, stdout=subprocess.PIPE,
+                                 "--segment-seconds", "3"], env=env, stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE, text=True)
-        time.sleep(seconds)
+        threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout] + [lines.put(None)], daemon=True).start()
+        printed, danced, deadline = [], 0, time.monotonic() + 60
+        while danced < segments and time.monotonic() < deadline:
+            try:
+                line = lines.get(timeout=max(0.1, deadline - time.monotonic()))
+            except queue.Empty:
+                break
+            if line is None:
+                break
+            printed.append(line)
+            danced += line.startswith("segment ")
         proc.send_signal(signal.SIGINT)
-        stdout, stderr = proc.communicate(timeout=60)
+        proc.wait(timeout=60)            # (standard output is the reader thread's; standard error is short)
+        stderr = proc.stderr.read()
+        while (line := lines.get(timeout=10)) is not None:
+            printed.append(line)
     finally:
         player.kill()
+    stdout = "".join(printed)
+    assert danced == segments, stdout + stderr
     assert proc.returncode == 0 and "stopping" in stderr and "Traceback" not in stderr, stderr
     return subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr)
 
 
+def _danced_s(stdout: str) -> float:
+    """Where the last segment the stream reported ends, in seconds of dance."""
+    return float(re.findall(r"motion\s+[\d.]+-\s*([\d.]+) s", stdout)[-1])
+
+
 def test_stream_system_dances_to_what_the_computer_plays(sound_server, tmp_path):
     out = tmp_path / "system.bvh"
-    proc = _dance_while_a_song_plays("system", sound_server, out, 15)
+    proc = _dance_while_a_song_plays("system", sound_server, out, 4)
     tempo = float(re.search(r"^style .*, ([\d.]+) bpm$", proc.stdout, re.M).group(1))
     assert min(abs(tempo - 130.3 * k) for k in (0.5, 1.0, 2.0)) < 4.0, proc.stdout   # the song's tempo was heard
-    assert read_bvh(out).n_frames >= 6 * 30                                         # seconds of dance on disk
+    assert read_bvh(out).n_frames >= round(_danced_s(proc.stdout) * 30) - 1          # every segment danced is on disk
 
 
 def test_stream_mic_reads_the_default_input(sound_server, tmp_path):
     # Here the default input is the null sink's monitor (the machine has no microphone): the song again.
     out = tmp_path / "mic.bvh"
-    _dance_while_a_song_plays("mic", sound_server, out, 8)
-    assert read_bvh(out).n_frames > 0
+    proc = _dance_while_a_song_plays("mic", sound_server, out, 2)
+    assert read_bvh(out).n_frames >= round(_danced_s(proc.stdout) * 30) - 1
 
 
 def test_no_sound_server_is_a_clear_error(tmp_path):

@@ -116,7 +116,9 @@ def test_the_first_motion_comes_within_two_seconds_then_whole_segments(song, clo
     summary = run_live(source, clips.append, config=LiveConfig(segment_s=5.0, database=bundled_db),
                        on_report=reports.append, realtime=False)
     first = reports[0]
-    assert first.audio_end_s <= 2.0        # cut after 1.8 s of audio (the wall time: benchmarks/live_bench.py)
+    # Counted in audio read (the scripted clock), not wall time: the cut comes after FIRST_SEGMENT_S of music.
+    # How soon the motion is ready in wall time is benchmarks/live_bench.py's to measure.
+    assert first.audio_end_s == pytest.approx(runtime.FIRST_SEGMENT_S, abs=0.11) and first.audio_end_s <= 2.0
     assert first.motion_end_s > 0.5 and len(first.beat_times_s) >= 2              # a short first dance, on beats
     assert reports[1].audio_end_s == pytest.approx(5.0, abs=0.11)                 # then the segments' grid
     for a, b in zip(reports[1:], reports[2:-1]):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import socket
 import subprocess
@@ -36,6 +37,16 @@ def mannequin_dance(bundled_db):
     return clip, character
 
 
+def _shown(tx, rx) -> list[tuple[int, object]]:
+    """(frame shown, or -1 for a held pose; the frame as received) for every bundle sent, in order. A sender
+    thread held up by a loaded machine skips frames rather than bursting them, so a frame may be missing."""
+    assert len(rx.frames) == len(tx.log)      # over localhost UDP every bundle arrives
+    shown = [s for s, *_ in tx.log]
+    frames = [s for s in shown if s >= 0]
+    assert frames == sorted(set(frames))      # in order, never twice
+    return list(zip(shown, rx.frames))
+
+
 def _free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
@@ -52,13 +63,13 @@ def test_a_receiver_rebuilds_every_frame_as_our_kinematics_says(mannequin_dance)
             half = clip.n_frames // 2          # two segments, both there before they are due: nothing held
             tx.push(VmcFrames(frames.names, frames.pos[:half], frames.rot[:half]))
             tx.push(VmcFrames(frames.names, frames.pos[half:], frames.rot[half:]))
-        assert rx.wait_for(clip.n_frames, 5.0)
-    assert [s for s, *_ in tx.log] == list(range(clip.n_frames)) and tx.held == 0
+        rx.wait_for(len(tx.log), 5.0)
+    shown = _shown(tx, rx)
+    assert tx.held == 0 and len(shown) + tx.skipped == clip.n_frames and shown[-1][0] == clip.n_frames - 1
     got = rx.frames
-    assert len(got) == clip.n_frames
     assert np.all(np.diff([f.t for f in got]) > 0)                      # in order
     assert all(f.ok == 1 and f.root == ("root", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0) for f in got)
-    err = max(np.abs(world_positions(f, frames.names, parent) - truth[k]).max() for k, f in enumerate(got))
+    err = max(np.abs(world_positions(f, frames.names, parent) - truth[k]).max() for k, f in shown)
     assert err < 1e-4, err
 
 
@@ -73,18 +84,20 @@ def test_a_late_segment_holds_the_pose_then_blends_back_onto_the_music(mannequin
             time.sleep(first / clip.fps + 0.7)   # the next segment comes 0.7 s late
             tx.push(VmcFrames(frames.names, frames.pos[first:], frames.rot[first:]))
         rx.wait_for(len(tx.log), 5.0)
-    shown = [s for s, *_ in tx.log]
-    assert tx.held > 0 and shown[first] == -1                          # held, not frozen into a gap
-    resumed = next(s for s in shown[first:] if s >= 0)
+    pairs = _shown(tx, rx)
+    shown = [s for s, _ in pairs]
+    hold = shown.index(-1)
+    assert tx.held > 0 and shown[hold - 1] == first - 1                # held once the frames ran out
+    resumed = next(s for s in shown[hold:] if s >= 0)
     assert resumed > first + 10                                        # back on the frame the music is at
-    shown_frames = [s for s in shown if s >= 0]
-    assert shown_frames == sorted(set(shown_frames))                   # never backwards, never twice
-    pos = np.array([world_positions(f, frames.names, parent) for f in rx.frames])
-    step = np.abs(np.diff(pos, axis=0)).max(axis=(1, 2))
+    pos = np.array([world_positions(f, frames.names, parent) for _, f in pairs])
+    # Each step between bundles, but across a skip of the sender's own (a loaded machine) or the resume.
+    steps = [np.abs(b - a).max() for (s0, _), (s1, _), a, b in zip(pairs, pairs[1:], pos, pos[1:])
+             if s0 < 0 or s1 < 0 or s1 == s0 + 1]
     jump = np.abs(truth[resumed] - truth[first - 1]).max()             # what cutting over would have shown
     natural = np.abs(np.diff(truth, axis=0)).max()
     assert jump > 2 * natural                                          # (a cut would be seen)
-    assert step.max() < max(0.5 * jump, 1.5 * natural)
+    assert max(steps) < max(0.5 * jump, 1.5 * natural)
 
 
 def test_nobody_listening_costs_the_dance_nothing(mannequin_dance):
@@ -92,7 +105,8 @@ def test_nobody_listening_costs_the_dance_nothing(mannequin_dance):
     frames = VmcFrames.of(clip, character.bones)
     with VmcSender("127.0.0.1", _free_udp_port(), clip.fps, margin_s=0.0) as tx:
         tx.push(VmcFrames(frames.names, frames.pos[:15], frames.rot[:15]))
-    assert len(tx.log) == 15 and [s for s, *_ in tx.log] == list(range(15))
+    shown = [s for s, *_ in tx.log]
+    assert shown == sorted(set(shown)) and shown[-1] == 14 and len(shown) + tx.skipped == 15
 
 
 def test_unity_names_and_addresses():
@@ -114,10 +128,10 @@ def test_stream_to_a_vmc_app(tmp_path):
         proc = run("stream", song, "--fast", "-q", "--segment-seconds", "2", "--vmc", f"127.0.0.1:{rx.port}",
                    cwd=tmp_path, timeout=120)
         assert proc.returncode == 0, proc.stderr
-        rx.wait_for(150, 5.0)
-    assert "vmc       " in proc.stdout and "frames sent to" in proc.stdout, proc.stdout
+        sent = int(re.search(r"(\d+) frames sent to", proc.stdout).group(1))
+        rx.wait_for(sent, 5.0)
     assert not (tmp_path / "live.bvh").exists()                        # --vmc alone writes no file
-    assert len(rx.frames) >= 150 and {"Hips", "LeftHand", "Head"} <= set(rx.frames[-1].bones)
+    assert sent > 0 and len(rx.frames) == sent and {"Hips", "LeftHand", "Head"} <= set(rx.frames[-1].bones)
     # Both at once: the BVH and the app.
     with VmcReceiver() as rx:
         proc = run("stream", song, "--fast", "-q", "--vmc", f"127.0.0.1:{rx.port}", "-o", tmp_path / "d.bvh",
@@ -156,10 +170,12 @@ def test_three_vrm_fed_the_vmc_messages_poses_the_avatar_as_our_kinematics_and_o
     with VmcReceiver() as rx:
         with VmcSender("127.0.0.1", rx.port, dance.fps, margin_s=0.0) as tx:
             tx.push(frames)
-        assert rx.wait_for(dance.n_frames, 5.0)
+        rx.wait_for(len(tx.log), 5.0)
+    received = dict(_shown(tx, rx))
     assert tx.held == 0
-    times = [f"{f / dance.fps:.9g}" for f in FRAMES]
-    poses.write_text(json.dumps({t: vrm_pose(rx.frames[f]) for t, f in zip(times, FRAMES)}))
+    picked = [min((s for s in received if s >= 0), key=lambda s: abs(s - f)) for f in FRAMES]   # (a skip: the next)
+    times = [f"{f / dance.fps:.9g}" for f in picked]
+    poses.write_text(json.dumps({t: vrm_pose(received[f]) for t, f in zip(times, picked)}))
     reports = {}
     for name, source in (("vmc", poses), ("vrma", animation)):
         out = tmp_path / name
@@ -171,7 +187,7 @@ def test_three_vrm_fed_the_vmc_messages_poses_the_avatar_as_our_kinematics_and_o
         assert reports[name]["ok"] and reports[name]["errors"] == [], reports[name]["errors"]
     _, ours = clip_fk(dance)
     entry = reports["vmc"]["avatars"][0]
-    for t, f in zip(times, FRAMES):
+    for t, f in zip(times, picked):
         error = max(np.linalg.norm(np.array(entry["positions"][t][b]) - ours[f, j]) for b, j in MANNEQUIN_BONES.items())
         assert error < 0.003, (f, error)                                   # metres
     shots = {name: [tmp_path / name / f"0_{k}.png" for k in range(len(times))] for name in reports}
@@ -196,13 +212,13 @@ def test_latency_sets_the_segment_length_and_bad_values_are_clear_errors(tmp_pat
 def test_the_avatar_dances_a_whole_number_of_bars_behind_the_music(mannequin_dance):
     clip, character = mannequin_dance
     frames = VmcFrames.of(clip, character.bones)
-    with VmcSender("127.0.0.1", _free_udp_port(), clip.fps, margin_s=0.5) as tx:
+    with VmcSender("127.0.0.1", _free_udp_port(), clip.fps, margin_s=2.0) as tx:
         tx.push(VmcFrames(frames.names, frames.pos[:5], frames.rot[:5]))
         heard_at = time.perf_counter() - 1.9          # the music began 1.9 s ago; bars of 1.6 s
-        tx.align(heard_at, 1.6)
+        tx.align(heard_at, 1.6)                       # (well before the first frame is due, even on a busy machine)
     bars = (tx.log[0][1] - heard_at) / 1.6
     assert tx.delay_s == pytest.approx(tx.log[0][1] - heard_at) and abs(bars - round(bars)) < 1e-6
-    assert round(bars) == 2                            # the first bar line after the clock's own start (2.4 s)
+    assert round(bars) == 3                            # the first bar line after the clock's own start (about 3.9 s)
 
 
 def test_a_full_socket_buffer_loses_bundles_never_the_dance(mannequin_dance):
@@ -227,9 +243,11 @@ def test_a_full_socket_buffer_loses_bundles_never_the_dance(mannequin_dance):
         with VmcSender("127.0.0.1", rx.port, clip.fps, margin_s=0.0) as tx:
             tx._sock = FullEveryThird(tx._sock)
             tx.push(VmcFrames(frames.names, frames.pos[:30], frames.rot[:30]))
-        rx.wait_for(20, 5.0)
-    assert [s for s, *_ in tx.log] == list(range(30))          # every frame had its turn, in order
-    assert tx.stats()["lost"] == 10 and len(rx.frames) == 20   # the lost ones never arrived, the rest did
+        rx.wait_for(len(tx.log) - len(tx.log) // 3, 5.0)
+    shown = [s for s, *_ in tx.log]
+    assert shown == sorted(set(shown)) and shown[-1] == 29 and len(shown) + tx.skipped == 30   # every frame's turn
+    lost = len(tx.log) // 3
+    assert tx.stats()["lost"] == lost and len(rx.frames) == len(tx.log) - lost   # the refused never arrived
 
 
 def test_vmc_listen_says_what_reaches_its_port(mannequin_dance, tmp_path):
