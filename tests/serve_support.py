@@ -6,6 +6,7 @@ from __future__ import annotations
 import http.client
 import json
 import subprocess
+import threading
 import time
 import uuid
 from pathlib import Path
@@ -102,3 +103,50 @@ def live_messages(server, query: str, timeout_s: float = 40.0):
             if messages[-1]["type"] in ("end", "error"):
                 break
     return messages, audio
+
+
+def capture_session(server, query: str, pcm: bytes, rate: int, *, pace: float = 1.0, piece_s: float = 0.1,
+                    end: bool = True, until=None, timeout_s: float = 60.0):
+    """A page's capture over /ws/live?source=...: ``pcm`` (16-bit mono at ``rate``) sent in pieces of ``piece_s``
+    at ``pace`` x real time (then {"type": "end"} if ``end``), while the messages are read until the end, an
+    error, ``until(messages)`` or ``timeout_s``. Returns (JSON messages, audio bytes received back)."""
+    from websockets.sync.client import connect
+
+    messages, audio = [], 0
+    t0 = time.monotonic()
+    with connect(f"ws://{server[0]}:{server[1]}/ws/live?{query}", open_timeout=10, max_size=None) as ws:
+        def send():
+            size = 2 * int(piece_s * rate)
+            try:
+                for i, k in enumerate(range(0, len(pcm), size)):
+                    time.sleep(max(0.0, t0 + i * piece_s / pace - time.monotonic()))
+                    ws.send(pcm[k:k + size])
+                if end:
+                    ws.send(json.dumps({"type": "end"}))
+            except Exception:  # the server closed the socket: a test reads why from the messages
+                pass
+
+        sender = threading.Thread(target=send, daemon=True)
+        sender.start()
+        while time.monotonic() - t0 < timeout_s:
+            try:
+                m = ws.recv(timeout=max(0.1, t0 + timeout_s - time.monotonic()))
+            except Exception:  # a timeout, or the server closed the connection
+                break
+            if isinstance(m, bytes):
+                audio += len(m)
+                continue
+            messages.append(json.loads(m))
+            if messages[-1]["type"] in ("end", "error") or (until is not None and until(messages)):
+                break
+    return messages, audio
+
+
+def song_pcm(path: Path, rate: int, seconds: float) -> bytes:
+    """The first ``seconds`` of a song as 16-bit mono PCM at ``rate`` (what a page's capture sends)."""
+    import numpy as np
+    import soxr
+
+    y, sr = sf.read(path, dtype="float32", frames=int(seconds * sf.info(path).samplerate))
+    y = soxr.resample(y.mean(axis=1) if y.ndim > 1 else y, sr, rate)
+    return (np.clip(y, -1, 1) * 32767).astype("<i2").tobytes()

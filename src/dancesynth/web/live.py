@@ -24,6 +24,7 @@ import asyncio
 import contextlib
 import json
 import threading
+import time
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -32,7 +33,7 @@ import numpy as np
 from ..errors import DanceSynthError
 from ..live.beats import LATENCY_S
 from ..types import MAX_SEED, SEGMENT_S
-from ..live.sources import SR
+from ..live.sources import SR, PushedAudio
 
 # Motion for stream time t is ready one segment plus the beat tracker's latency after t
 # arrives, plus the step; the margin covers the step and network jitter.
@@ -42,6 +43,14 @@ MIN_JOIN_DELAY_S = 0.3
 # 50 viewers x 50 sends a second kept the event loop so busy that, beside 100 dances, every viewer fell
 # behind (benchmarks/serve_load.py). A stall or the end sends what is held at once.
 RELAY_S = 0.1
+# A page's capture (``?source=tab|mic&rate=HZ``): 16-bit mono PCM at the page's own rate, in binary messages of
+# at most MAX_CAPTURE_PIECE_S, never more than CAPTURE_BURST_S ahead of the time it has been sending (a page
+# sends as it hears), for at most ``LiveHub.max_capture_s``; the text message {"type": "end"} ends it.
+CAPTURE_SOURCES = {"tab": "the shared tab", "mic": "the microphone"}
+CAPTURE_RATES = (8000, 192000)
+MAX_CAPTURE_PIECE_S = 1.0
+CAPTURE_BURST_S = 2.0
+MAX_CAPTURE_S = 4 * 3600.0
 
 
 def playback_delay_s(segment_s: float) -> float:
@@ -78,8 +87,9 @@ class Broadcast:
 
     def __init__(self, url: str, config, *, loop: asyncio.AbstractEventLoop, max_lag_s: float, on_over,
                  realtime: bool = True, stats: dict | None = None, character: str = "mannequin",
-                 load_character=None):
+                 load_character=None, source=None):
         self.url, self.config, self.loop = url, config, loop
+        self._source = source   # a ``PushedAudio`` the page fills (a capture), else the stream at ``url``
         self.character = character
         self._load_character = load_character or _load_character
         self.max_lag_s, self.realtime = max_lag_s, realtime
@@ -128,7 +138,7 @@ class Broadcast:
         try:
             # Loaded here, not on the event loop: the mannequin's mesh takes a second the first time.
             on_character = SegmentRetargeter(self._load_character(self.character))
-            source = AudioSource(self.url, realtime=self.realtime)
+            source = self._source or AudioSource(self.url, realtime=self.realtime)
             relay = _RelaySource(source, lambda pcm: post(self._publish_audio, pcm), int(RELAY_S * source.sr))
             summary = run_live(relay, on_frames, config=self.config, on_report=on_report, realtime=self.realtime,
                                stop=self.stop)
@@ -245,13 +255,8 @@ class _RelaySource:
         self._held: list[np.ndarray] = []
         self._n_held = 0
 
-    @property
-    def error(self) -> str:
-        return self._source.error
-
-    @property
-    def device(self):
-        return self._source.device
+    def __getattr__(self, name):   # the rest (error, device, pushed) is the source's
+        return getattr(self._source, name)
 
     def read(self, timeout: float):
         try:
@@ -283,8 +288,9 @@ class LiveHub:
     """
 
     def __init__(self, database, *, max_streams: int = 2, max_lag_s: float = 20.0, realtime: bool = True,
-                 load_character=None):
+                 load_character=None, max_capture_s: float = MAX_CAPTURE_S):
         self.database, self.max_streams, self.max_lag_s = database, max_streams, max_lag_s
+        self.max_capture_s = max_capture_s
         self.realtime = realtime
         self.load_character = load_character   # a built-in's name -> Character (the server caches them)
         self.broadcasts: dict[tuple, Broadcast] = {}
@@ -292,20 +298,37 @@ class LiveHub:
 
     def join(self, url: str, segment_s: float, style: str | None, seed: int | None,
              character: str = "mannequin") -> tuple[Broadcast, Viewer]:
+        key = (url, segment_s, style, seed, character)
+        broadcast = self.broadcasts.get(key) or self._start(
+            key, url, segment_s, style, seed, character,
+            busy="watch one of them (the same URL, settings and character) or try again later")
+        return broadcast, broadcast.join()
+
+    def capture(self, client: str, kind: str, rate: int, segment_s: float, style: str | None, seed: int | None,
+                character: str = "mannequin") -> tuple[Broadcast, Viewer, PushedAudio]:
+        """A dance of its own to what ``client``'s page captures (``kind``: tab or mic) and sends at ``rate``:
+        one at a time per client, and it counts among the server's ``max_streams``."""
+        key = ("capture", client)
+        if key in self.broadcasts:
+            raise _Busy("this computer already sends the server a live source; stop that one first")
+        source = PushedAudio(CAPTURE_SOURCES[kind], rate)
+        broadcast = self._start(key, f"{kind} capture from {client}", segment_s, style, seed, character,
+                                busy="try again later", source=source)
+        return broadcast, broadcast.join(), source
+
+    def _start(self, key: tuple, url: str, segment_s: float, style: str | None, seed: int | None,
+               character: str, *, busy: str, source: PushedAudio | None = None) -> Broadcast:
         from ..live.runtime import LiveConfig
 
-        key = (url, segment_s, style, seed, character)
-        broadcast = self.broadcasts.get(key)
-        if broadcast is None:
-            if len(self.broadcasts) >= self.max_streams:
-                raise _Busy(f"the server already dances to {self.max_streams} streams; watch one of them "
-                            "(the same URL, settings and character) or try again later")
-            config = LiveConfig(segment_s=segment_s, style=style, seed=seed, database=self.database)
-            broadcast = Broadcast(url, config, loop=asyncio.get_running_loop(), max_lag_s=self.max_lag_s,
-                                  on_over=self._forget, realtime=self.realtime, stats=self.stats,
-                                  character=character, load_character=self.load_character)
-            self.broadcasts[key] = broadcast
-        return broadcast, broadcast.join()
+        if len(self.broadcasts) >= self.max_streams:
+            raise _Busy(f"the server already dances to {self.max_streams} streams; {busy}")
+        config = LiveConfig(segment_s=segment_s, style=style, seed=seed, database=self.database)
+        # A capture is live whatever the hub's pace: its stalls are bridged, a slow viewer let go.
+        broadcast = Broadcast(url, config, loop=asyncio.get_running_loop(), max_lag_s=self.max_lag_s,
+                              on_over=self._forget, realtime=self.realtime or source is not None, stats=self.stats,
+                              character=character, load_character=self.load_character, source=source)
+        self.broadcasts[key] = broadcast
+        return broadcast
 
     def _forget(self, broadcast: Broadcast) -> None:
         self.broadcasts = {k: b for k, b in self.broadcasts.items() if b is not broadcast}
@@ -338,32 +361,51 @@ def parse_seed(text: str | None) -> int | None | bool:
 
 async def watch(ws, hub: LiveHub) -> None:
     """Serve one viewer of ``/ws/live?url=...&segment_s=...&style=...&seed=...&character=...`` until the dance
-    or the viewer ends. ``character`` is a built-in (``retarget.rigs.LAYOUTS``; default the mannequin): a path
-    would load a file from the server's disk."""
+    or the viewer ends; with ``source=tab|mic&rate=HZ`` instead of ``url``, a dance to what the page itself
+    captures and sends on this socket (see CAPTURE_SOURCES). ``character`` is a built-in
+    (``retarget.rigs.LAYOUTS``; default the mannequin): a path would load a file from the server's disk."""
     from ..retarget.character import DEFAULT_CHARACTER
     from ..retarget.rigs import LAYOUTS
 
     q = ws.query_params
     url = q.get("url", "").strip()
+    kind = q.get("source", "").strip()
     try:
         segment_s = float(q.get("segment_s") or SEGMENT_S)
     except ValueError:
         segment_s = None
     seed = parse_seed(q.get("seed"))
     character = q.get("character", "").strip() or DEFAULT_CHARACTER
-    if not url.startswith(("http://", "https://")):
+    rate = q.get("rate", "")
+    if kind and kind not in CAPTURE_SOURCES:
+        return await _refuse(ws, f"source must be {' or '.join(CAPTURE_SOURCES)} (what the page captures)")
+    if kind and (not rate.isdigit() or not CAPTURE_RATES[0] <= int(rate) <= CAPTURE_RATES[1]):
+        return await _refuse(ws, "rate must be the capture's sample rate in Hz, a whole number from "
+                                 f"{CAPTURE_RATES[0]} to {CAPTURE_RATES[1]}")
+    if not kind and not url.startswith(("http://", "https://")):
         return await _refuse(ws, "give the stream as ?url=http(s)://...")
     if segment_s is None or not 1.0 <= segment_s <= 30.0 or seed is False:
         return await _refuse(ws, "segment_s must be a number from 1 to 30 and seed a whole number")
     if character not in LAYOUTS:
         return await _refuse(ws, f"unknown character {character[:40]!r}; pick one of {', '.join(LAYOUTS)} "
                                  "(/api/characters)")
+    receiver = None
     try:
-        broadcast, viewer = hub.join(url, segment_s, q.get("style") or None, seed, character)
+        if kind:
+            client = ws.client.host if ws.client else "unknown"
+            broadcast, viewer, source = hub.capture(client, kind, int(rate), segment_s, q.get("style") or None,
+                                                    seed, character)
+            receiver = asyncio.create_task(_receive(ws, source, int(rate), hub.max_capture_s))
+        else:
+            broadcast, viewer = hub.join(url, segment_s, q.get("style") or None, seed, character)
     except _Busy as exc:
         return await _refuse(ws, str(exc))
     viewer.sender = asyncio.create_task(_pump(ws, viewer, broadcast))
     try:
+        if receiver is not None:
+            await asyncio.wait({viewer.sender, receiver}, return_when=asyncio.FIRST_COMPLETED)
+            if receiver.done() and receiver.result() == "gone":
+                return   # the page went away: nobody to send the rest to
         await viewer.sender
         await asyncio.wait_for(ws.close(), 2.0)
     except asyncio.CancelledError:
@@ -374,7 +416,41 @@ async def watch(ws, hub: LiveHub) -> None:
     except Exception:  # the viewer went away
         pass
     finally:
+        for task in (viewer.sender, receiver):
+            if task is not None:
+                task.cancel()
         broadcast.leave(viewer)
+
+
+async def _receive(ws, source: PushedAudio, rate: int, max_s: float) -> str:
+    """The page's capture into ``source``, within its bounds, until it ends: 'gone' if the page went away,
+    else 'ended' (it said so, or broke a bound: the dance ends with why)."""
+    started, samples = None, 0
+    max_bytes = 2 * int(MAX_CAPTURE_PIECE_S * rate)
+    while True:
+        message = await ws.receive()
+        if message["type"] == "websocket.disconnect":
+            source.end()
+            return "gone"
+        data = message.get("bytes")
+        if data is None:   # text: the page's capture ended (the user stopped sharing)
+            source.end()
+            return "ended"
+        now = time.monotonic()
+        started = now if started is None else started
+        samples += len(data) // 2
+        why = ""
+        if len(data) % 2 or len(data) > max_bytes:
+            why = (f"the page sent {len(data)} bytes at once; audio comes as whole 16-bit samples, "
+                   f"at most {MAX_CAPTURE_PIECE_S:g} s a message")
+        elif samples / rate > now - started + CAPTURE_BURST_S:
+            why = "the page sent audio faster than real time"
+        elif samples / rate > max_s:
+            why = f"a capture lasts at most {max_s / 60:g} min; start it again to go on"
+        if why:
+            source.end(why)
+            return "ended"
+        source.push(data)
 
 
 async def _pump(ws, viewer: Viewer, broadcast: Broadcast) -> None:

@@ -8,7 +8,8 @@ character's rig), the music's beats and sections, a URL the page plays the song 
 the dance's own URLs (``/api/dances/{id}/...``: GLB with the skinned mesh, for the page to
 show, and downloads as BVH, GLB, VRMA and an MP4 rendered with the song; ``web/dances.py``
 keeps the last few dances, ``web/uploads.py`` the uploaded songs). ``/ws/live?url=&character=`` dances to a stream on a built-in
-character, shared by everyone who watches it (``web/live.py``); ``/api/live`` lists those
+character, shared by everyone who watches it (``web/live.py``), and ``/ws/live?source=tab|mic&rate=``
+to the sound the page captures and sends on the same socket; ``/api/live`` lists those
 streams; ``/api/characters/{name}.glb`` is a character in its rest pose, which the page poses
 from the live frames. The page drives the animation from
 the audio element's clock, so motion and music stay in sync through seeks and pauses.
@@ -45,7 +46,7 @@ from starlette.websockets import WebSocket
 from ..errors import DanceSynthError, InputError
 from ..types import MAX_SEED
 from .dances import DOWNLOADS, FIGURES, RENDER_RETRY_S, VIDEO_SIZE, DanceStore, StoredDance
-from .live import LiveHub, parse_seed, watch
+from .live import MAX_CAPTURE_S, LiveHub, parse_seed, watch
 from .uploads import UploadStore
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
@@ -138,7 +139,7 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
                max_waiting_dances: int = 16, max_stored_uploads: int = 8, max_live_streams: int = 2,
                max_viewer_lag_s: float = MAX_VIEWER_LAG_S, live_realtime: bool = True,
                max_stored_dances: int = 8, max_renders: int = 1, max_waiting_renders: int = 2,
-               video_size: tuple[int, int] = VIDEO_SIZE) -> Starlette:
+               video_size: tuple[int, int] = VIDEO_SIZE, max_capture_s: float = MAX_CAPTURE_S) -> Starlette:
     """The web app: the page, the bundled songs, and ``POST /api/dance``.
 
     ``database`` is passed to ``dancesynth.dance`` (a folder, a ``MotionDatabase`` or
@@ -148,7 +149,7 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
     Retry-After (the page waits that long and asks again). The last ``max_stored_dances``
     dances can be downloaded; ``max_renders`` videos render at once and
     ``max_waiting_renders`` more wait, beyond that a video is refused with 503 too; videos are
-    ``video_size`` (width, height) pixels.
+    ``video_size`` (width, height) pixels. A page's tab or microphone capture lasts at most ``max_capture_s``.
     """
     from ..api import ENGINES, DanceConfig, list_styles
     from ..motion.database import MotionDatabase, open_database
@@ -162,7 +163,7 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
     songs = {s["name"]: s for s in bundled_songs()}
     dances = DanceQueue(max_concurrent_dances, max_waiting_dances)
     hub = LiveHub(database, max_streams=max_live_streams, max_lag_s=max_viewer_lag_s, realtime=live_realtime,
-                  load_character=_character)
+                  load_character=_character, max_capture_s=max_capture_s)
     kept = DanceStore(max_dances=max_stored_dances, max_renders=max_renders, max_waiting_renders=max_waiting_renders,
                       video_size=video_size)
     default_engine = DanceConfig().engine

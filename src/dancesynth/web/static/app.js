@@ -456,14 +456,22 @@ async function downloadVideo() {
 // character's rig), and every segment's frames and beats. Audio is scheduled with Web Audio
 // `delay_s` after it arrives, the delay the double buffer needs for the motion of each moment
 // to be here before it is heard. The stick figure is built from the frames kept; a character
-// with a mesh is its rest-pose GLB (loaded once) posed by the same animation.
+// with a mesh is its rest-pose GLB posed by the same animation.
+// A capture (a tab's sound or the microphone) goes the other way too: the page sends what it hears
+// over the same socket (capture.js) and the server dances to it. The sound comes back like a
+// stream's and keeps the dance's clock, heard only where the tab's own playback was muted for it
+// (else the music would sound twice, or a microphone would hear itself).
 let live = null;
 const KEEP_S = 60; // the live figure holds the last minute of motion
+const CAPTURE_NAMES = { tab: "the tab's sound", mic: 'the microphone' };
+const QUIET = { echoCancellation: false, noiseSuppression: false, autoGainControl: false }; // music, not speech
 
 function stopLive() {
+	state.capturing = null; // a capture still waiting for the user's choice is not started
 	if (!live) return;
 	live.ws.onmessage = live.ws.onclose = null;
 	live.ws.close();
+	if (live.capture) live.capture.stream.getTracks().forEach((t) => t.stop());
 	live.ctx.close().catch(() => {});
 	live = null;
 }
@@ -477,7 +485,7 @@ function liveAudio(buffer) {
 	for (let i = 0; i < pcm.length; i++) ch[i] = pcm[i] / 32768;
 	const src = live.ctx.createBufferSource();
 	src.buffer = b;
-	src.connect(live.ctx.destination);
+	src.connect(live.out);
 	src.start(Math.max(live.t0 + live.samples / live.sr, live.ctx.currentTime));
 	live.samples += pcm.length;
 	state.live.heard_s = live.samples / live.sr;
@@ -526,17 +534,108 @@ function startLive(event) {
 	audio.pause();
 	const url = $('live-url').value.trim();
 	if (!url) { setStatus('Give the URL of a stream (http or https).', true); return; }
+	openLive({ url }, new AudioContext(), null);
+	setStatus('Connecting to the stream…');
+}
+
+// Dance to a tab's sound or the microphone. The browser asks the user first; the audio context is made
+// here, in the click, so the browser lets it play.
+async function startCapture(kind) {
+	stopLive();
+	audio.pause();
+	const what = CAPTURE_NAMES[kind];
+	const media = navigator.mediaDevices;
+	const getter = kind === 'tab' ? 'getDisplayMedia' : 'getUserMedia';
+	if (!media || !media[getter] || !window.AudioWorkletNode) {
+		setStatus(`This browser cannot share ${what} with the page` + (window.isSecureContext ? '.' :
+			': browsers allow it only on https:// pages and on localhost.'), true);
+		return;
+	}
+	const ctx = new AudioContext();
+	const token = (state.capturing = {});
+	let stream;
+	try {
+		setStatus(kind === 'tab' ? 'Pick the tab that plays the music, with its audio shared…' :
+			'Allow the microphone…');
+		stream = kind === 'tab'
+			? await media.getDisplayMedia({ video: true, audio: { ...QUIET, suppressLocalAudioPlayback: true },
+				preferCurrentTab: false, selfBrowserSurface: 'exclude', systemAudio: 'include' })
+			: await media.getUserMedia({ audio: QUIET });
+	} catch (err) {
+		ctx.close().catch(() => {});
+		if (state.capturing !== token) return;
+		state.capturing = null;
+		setStatus(captureRefused(kind, err), true);
+		return;
+	}
+	const track = stream.getAudioTracks()[0];
+	const surface = stream.getVideoTracks().map((t) => t.getSettings().displaySurface)[0];
+	stream.getVideoTracks().forEach((t) => t.stop()); // only its sound is wanted
+	if (state.capturing !== token) { stream.getTracks().forEach((t) => t.stop()); ctx.close().catch(() => {}); return; }
+	state.capturing = null;
+	if (!track) {
+		ctx.close().catch(() => {});
+		setStatus('What was shared has no sound: share a tab, and tick “Share tab audio” in the browser’s dialog.', true);
+		return;
+	}
+	// The tab's own playback is muted only for a tab (a screen's sound keeps playing where it is).
+	const echo = kind === 'tab' && surface === 'browser' && track.getSettings().suppressLocalAudioPlayback === true;
+	try {
+		await ctx.audioWorklet.addModule('/static/capture.js');
+	} catch (err) {
+		stream.getTracks().forEach((t) => t.stop());
+		ctx.close().catch(() => {});
+		setStatus(`The page could not start capturing: ${err.message || err}`, true);
+		return;
+	}
+	// Connected on to the speakers (it writes silence there): the browser runs only what leads to them.
+	const node = new AudioWorkletNode(ctx, 'dancesynth-capture');
+	ctx.createMediaStreamSource(stream).connect(node).connect(ctx.destination);
+	const mine = openLive({ source: kind, rate: String(ctx.sampleRate) }, ctx,
+		{ kind, stream, node, echo, sent_s: 0 });
+	node.port.onmessage = (ev) => {
+		if (live !== mine || mine.ws.readyState !== WebSocket.OPEN) return;
+		mine.capture.sent_s += ev.data.byteLength / 2 / ctx.sampleRate;
+		mine.ws.send(ev.data);
+		state.live.capture.sent_s = mine.capture.sent_s;
+	};
+	track.addEventListener('ended', () => {
+		if (live !== mine) return;
+		if (mine.ws.readyState === WebSocket.OPEN) mine.ws.send(JSON.stringify({ type: 'end' }));
+		setStatus(`You stopped sharing ${what}; the dance plays to the end of what was heard`);
+	});
+	setStatus(`Sending ${what} to the server…`);
+}
+
+function captureRefused(kind, err) {
+	const what = CAPTURE_NAMES[kind];
+	if (err.name === 'NotAllowedError') {
+		return kind === 'tab' ? 'No tab was shared (the browser refused, or the choice was cancelled). Press ' +
+			'“Dance to a tab” again and pick a tab, with “Share tab audio” ticked.' :
+			'The browser refused the microphone. Allow it for this site (the icon in the address bar) and press ' +
+			'“Dance to the microphone” again.';
+	}
+	if (err.name === 'NotFoundError') return `No ${kind === 'tab' ? 'tab or screen' : 'microphone'} was found to share.`;
+	if (err.name === 'NotReadableError') return `${what} could not be opened (is another program using it?).`;
+	return `Could not capture ${what}: ${err.name}: ${err.message}`;
+}
+
+// One live dance in the page: a stream's (query.url) or a capture's (query.source, query.rate).
+function openLive(query, ctx, capture) {
 	const character = $('live-character').value;
 	const mesh = Boolean(characterInfo[character] && characterInfo[character].mesh);
-	const params = new URLSearchParams({ url, segment_s: $('live-segment').value || '5', style: $('style').value,
+	const params = new URLSearchParams({ ...query, segment_s: $('live-segment').value || '5', style: $('style').value,
 		seed: $('seed').value, character });
 	const ws = new WebSocket(`${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws/live?${params}`);
 	ws.binaryType = 'arraybuffer';
-	live = { ws, ctx: new AudioContext(), t0: null, last: null, sr: 22050, samples: 0, fps: 30, delay: 10,
+	const out = ctx.createGain();
+	out.gain.value = capture && !capture.echo ? 0 : 1;
+	out.connect(ctx.destination);
+	live = { ws, ctx, out, capture, t0: null, last: null, sr: 22050, samples: 0, fps: 30, delay: 10,
 		start: 0, hierarchy: null, rows: [], base: null, beats: [], time: 0, character, stick: null, model: null };
 	state.live = { state: 'connecting', frames: 0, beats: 0, time: 0, heard_s: 0, error: null, starved_s: 0, motion_until_s: 0,
-		playing_s: 0, server_late_s: 0, delay_s: null, character, model: mesh ? 'loading' : null };
-	setStatus('Connecting to the stream…');
+		playing_s: 0, server_late_s: 0, delay_s: null, character, model: mesh ? 'loading' : null,
+		capture: capture && { kind: capture.kind, rate: ctx.sampleRate, echo: capture.echo, sent_s: 0 } };
 	$('info').textContent = mesh ? `Live: the ${character}` : `Live: the stick figure on the ${character} rig`;
 	offerFigures(false); // the stick figure until the character's mesh is here
 	offerDownloads(null);
@@ -550,6 +649,10 @@ function startLive(event) {
 			showLive();
 		}).catch((err) => { if (live === mine) liveModelFailed(String(err.message || err)); });
 	}
+	// How the dance stands against what the user hears: a stream's sound plays here, in step with it; a
+	// capture's is heard where it plays, this long before its dance.
+	const behind = () => capture && !capture.echo ? `dancing ${live.delay.toFixed(1)} s behind ${CAPTURE_NAMES[capture.kind]}`
+		: `playing ${live.delay.toFixed(1)} s behind the ${capture ? 'tab' : 'stream'}`;
 	ws.onmessage = (ev) => {
 		if (live !== mine) return;
 		if (typeof ev.data !== 'string') { liveAudio(ev.data); return; }
@@ -565,15 +668,16 @@ function startLive(event) {
 			liveFrames(m.start_frame, m.rows);
 			state.live.state = 'dancing';
 			setStatus(`Live: ${(state.live.frames / live.fps).toFixed(1)} s of dance ready, ` +
-				`${state.live.heard_s.toFixed(1)} s heard, playing ${live.delay.toFixed(1)} s behind the stream`);
+				`${state.live.heard_s.toFixed(1)} s heard, ${behind()}`);
 		} else if (m.type === 'beats') {
 			live.beats.push(...m.beats);
 			state.live.beats = live.beats.length;
+			state.live.tempo_bpm = m.tempo_bpm;
 			state.live.server_late_s += m.late_s || 0;
 		} else if (m.type === 'end') {
 			state.live.state = 'ended';
-			setStatus(`The stream ended: ${m.summary.segments} segments, style ${m.summary.style}; ` +
-				'the dance plays to the end of the music');
+			setStatus(`The ${capture ? 'capture' : 'stream'} ended: ${m.summary.segments} segments, style ` +
+				`${m.summary.style}; the dance plays to the end of the music`);
 		} else if (m.type === 'error') {
 			state.live.state = 'error';
 			state.live.error = m.error;
@@ -585,10 +689,14 @@ function startLive(event) {
 			state.live.state = 'closed';
 			setStatus('The connection to the server closed.', true);
 		}
+		if (live === mine && capture) capture.stream.getTracks().forEach((t) => t.stop());
 	};
+	return mine;
 }
 
 $('live-controls').addEventListener('submit', startLive);
+$('live-tab').addEventListener('click', () => startCapture('tab'));
+$('live-mic').addEventListener('click', () => startCapture('mic'));
 $('stop-live').addEventListener('click', () => { stopLive(); setStatus('Stopped.'); });
 audio.addEventListener('play', () => { if (live) stopLive(); });
 $('controls').addEventListener('submit', requestDance);
