@@ -62,6 +62,37 @@ def test_file_source_decodes_everything(tmp_path):
     assert total / src.sr == pytest.approx(sf.info(TRUMPET).duration, abs=0.05)
 
 
+def test_pushed_audio_is_resampled_whole_and_ends_with_why():
+    """PCM pushed in odd-sized pieces at 48 kHz reads back as one clean 22.05 kHz stream (what soxr makes of
+    it at once); an end with a reason is the source's error; nothing pushed for stall_end_s ends it too."""
+    import soxr
+
+    from dancesynth.live.sources import SR, PushedAudio
+
+    y, sr = sf.read(BUNDLED_MUSIC / "sorohanro_-_solo-trumpet-06.ogg", dtype="float32")
+    y48 = soxr.resample(y if y.ndim == 1 else y.mean(axis=1), sr, 48000)
+    pcm = (np.clip(y48, -1, 1) * 32767).astype("<i2").tobytes()
+    source = PushedAudio("the microphone", 48000)
+    cuts = [0, 2 * 1000, 2 * 4801, 2 * 30000, len(pcm)]
+    for a, b in zip(cuts, cuts[1:]):
+        source.push(pcm[a:b])
+    source.end("the page stopped")
+    got = []
+    with pytest.raises(StopIteration):
+        while True:
+            chunk = source.read(0.05)
+            assert chunk is not None
+            got.append(chunk.samples)
+    got = np.concatenate(got)
+    whole = soxr.resample(np.frombuffer(pcm, "<i2").astype(np.float32) / 32768, 48000, SR)
+    assert got.size == whole.size and np.abs(got - whole).max() < 1e-3
+    assert source.error == "the page stopped" and source.heard_s == pytest.approx(y48.size / 48000, abs=1e-3)
+    quiet = PushedAudio("the shared tab", 44100, stall_end_s=0.2)
+    assert quiet.read(0.05) is None            # a stall, not yet an end
+    with pytest.raises(InputError, match="the shared tab: no audio came for 0.2 s"):
+        wait_for_audio(quiet, 5.0)
+
+
 def test_sources_refuse_what_they_cannot_play(tmp_path):
     with pytest.raises(InputError, match="no such file"):
         AudioSource(str(tmp_path / "missing.ogg"))

@@ -202,10 +202,10 @@ def test_latency_sets_the_segment_length_and_bad_values_are_clear_errors(tmp_pat
     from dancesynth.cli_live import segment_length
 
     assert segment_length(None, None) == 5.0 and segment_length(2.0, None) == 2.0
-    assert segment_length(None, 3.0) == pytest.approx(1.5)
+    assert segment_length(None, 3.0) == pytest.approx(3.0)
     out = tmp_path / "live.bvh"
     song = BUNDLED_MUSIC / "Kevin_MacLeod_-_Vibe_Ace.ogg"
-    assert_clean_failure(run("stream", song, "--latency", "2", "-o", out), out, "--latency 2", "at least 2.5")
+    assert_clean_failure(run("stream", song, "--latency", "0.5", "-o", out), out, "--latency 0.5", "at least 1 s")
     assert_clean_failure(run("stream", song, "--latency", "3", "--segment-seconds", "2", "-o", out), out, "not both")
 
 

@@ -12,7 +12,7 @@ import click
 from .cli_character import character_options
 from .cli_support import Progress, bvh_output
 from .errors import InputError
-from .defaults import BEAT_LATENCY_S as LATENCY_S, DEFAULT_FPS, SEGMENT_S
+from .defaults import DEFAULT_FPS, SEGMENT_S
 
 
 @click.command()
@@ -25,9 +25,9 @@ from .defaults import BEAT_LATENCY_S as LATENCY_S, DEFAULT_FPS, SEGMENT_S
                    "3tene, VirtualMotionCapture, EVMC4U...): usually 127.0.0.1:39539.")
 @click.option("--segment-seconds", type=float, default=None, help=f"Length of a segment (default {SEGMENT_S:g}).")
 @click.option("--latency", type=float, default=None, metavar="SECONDS",
-              help="The longest wait from a beat heard to its move: shorter segments (each sees less music ahead "
-                   f"when its moves are chosen); the beat tracker's {LATENCY_S:g} s of hindsight plus a segment "
-                   f"of at least 1 s. Default: {SEGMENT_S:g} s segments.")
+              help="The longest wait from a beat heard to its move (plus the few ms of its synthesis), at least 1 s: "
+                   "the segment length, so a shorter wait sees less music ahead when the moves are chosen "
+                   f"(they follow its loudness less). Default: {SEGMENT_S:g} s.")
 @click.option("--style", help="Style or genre to dance (default: chosen from the first segment's tempo).")
 @click.option("--fps", type=float, default=DEFAULT_FPS, show_default=True, help="Frame rate of the output.")
 @click.option("--seed", type=int, default=None, help="Vary the dance between runs.")
@@ -173,10 +173,9 @@ def segment_length(segment_seconds: float | None, latency: float | None) -> floa
         return SEGMENT_S if segment_seconds is None else segment_seconds
     if segment_seconds is not None:
         raise InputError("give --latency or --segment-seconds, not both (--latency sets the segment length)")
-    if not latency >= LATENCY_S + 1.0:   # NaN too
-        raise InputError(f"--latency {latency:g}: at least {LATENCY_S + 1.0:g} s (the beat tracker's "
-                         f"{LATENCY_S:g} s of hindsight and a segment of 1 s)")
-    return latency - LATENCY_S
+    if not latency >= 1.0:   # NaN too
+        raise InputError(f"--latency {latency:g}: at least 1 s (a segment of 1 s)")
+    return latency
 
 
 @click.command()

@@ -10,7 +10,9 @@
 //     node tests/clients/viewer_check.mjs URL OUT_DIR capture tab|mic [CHROMIUM] [OPTIONS]
 //         press "Dance to a tab" (or "... the microphone"): Chromium's fake capture device plays
 //         OPTIONS.audio_file; with OPTIONS.refuse the browser refuses instead, and the report holds
-//         the status line (no shots).
+//         the status line (no shots); with OPTIONS.capture_s, once that much has been sent the report
+//         presses Stop and waits for the dance's end (the server's summary is in page.live.summary);
+//         OPTIONS.segment: the segment length (default 2 s, live too).
 // OPTIONS, JSON: {"engine": .., "character": ..} choose them before Dance (live: the character only);
 // "stick": true also switches to the stick figure and takes c.png and d.png;
 // "playback": true pauses, seeks and plays to the end, noting the status line each time;
@@ -59,7 +61,7 @@ try {
 		throw null; // done: nothing to shoot
 	}
 	if (mode === 'live' || mode === 'capture') {
-		await page.fill('#live-segment', '2');
+		await page.fill('#live-segment', String(options.segment || 2));
 		if (options.character) await page.selectOption('#live-character', options.character);
 		if (mode === 'live') {
 			await page.fill('#live-url', value);
@@ -127,6 +129,16 @@ try {
 		report.view_after_toggle = await page.evaluate(() => window.dancesynth.view);
 		if (mode === 'song') await playFrom(page, 0.5, 1.0); // the song may have ended meanwhile
 		await shots(['c', 'd']);
+	}
+	if (options.capture_s) {
+		await page.waitForFunction((s) => window.dancesynth.live.capture.sent_s >= s, options.capture_s,
+			{ timeout: 1000 * options.capture_s + 30000 });
+		await page.click('#stop-live');
+		report.statuses.stopped = await statusText();
+		await page.waitForFunction(() => ['ended', 'error', 'closed'].includes(window.dancesynth.live.state), null,
+			{ timeout: 30000 });
+		report.timings.ended_ms = since();
+		report.statuses.ended = await statusText();
 	}
 	if (options.playback) await checkPlayback(page, statusText);
 	if (options.video) await checkVideo(page);

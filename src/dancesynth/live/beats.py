@@ -36,6 +36,7 @@ arrays of recent beats; nothing grows with the stream.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -224,6 +225,13 @@ class StreamingBeatTracker:
         if not np.isfinite(horizon):
             raise InputError(f"until_s must be a finite number of seconds, got {until_s!r}")
         return self._give(horizon)
+
+    def peek(self, until_s: float) -> BeatUpdate:
+        """What ``update(until_s=...)`` would give now, without giving it: the tracker stays anchored on the
+        beats it was sure of, and a later update gives these (or surer ones) again."""
+        probe = copy.copy(self)   # the buffers are only read; the state that giving changes in place is copied
+        probe._given, probe._bars = self._given.copy(), copy.deepcopy(self._bars)
+        return probe.update(until_s=until_s)
 
     def flush(self) -> BeatUpdate:
         """The stream ended: the remaining beats up to its end (none on its silent or decaying tail)."""

@@ -63,8 +63,7 @@ class LiveSinks:
                 raise InputError("VMC sends a humanoid avatar's bones: dance on a character, not the source rig")
 
             # The VMC clock starts when the next segment will be there before its first frame is due: the
-            # first segment (cut early, on beats up to the edge of what was heard) is followed a segment
-            # later by one whose beats end the beat tracker's hindsight before that edge.
+            # first segment (cut early) is followed a segment of audio later by the next.
             self.vmc = VmcSender(*address, fps, margin_s=MARGIN_S + segment_lead_s(segment_s))
 
     def on_report(self, report) -> None:

@@ -1,11 +1,16 @@
 """The double buffer of Xu et al.'s Fig. 1: segment n is synthesised while segment n+1 is heard.
 
 The main thread reads audio and feeds the streaming beat tracker; every
-``segment_s`` of audio it cuts a ``MusicSegment`` from the beats the tracker has
-made final (the first one early, after ``first_segment_s``, on every beat heard so far,
+``segment_s`` of audio it cuts a ``MusicSegment`` (the first early, after ``first_segment_s``,
 so that the dance starts within 2 s) and hands it to one worker thread, which runs the engine's pure
 ``step`` and passes the frames to a sink. Steps run in order on that one worker,
 so the engine's state never needs a lock; reading never waits for synthesis.
+
+A cut's beats are those the tracker is sure of (given for good, ``hindsight_s`` before what was
+heard) and then its guess at those since, up to what was heard (``peek``: not given, so the
+tracker stays anchored on sure beats; the next cut keeps the sure beats after the last one danced).
+So a beat's move is ready at most a segment after the beat was heard, and a wrong guess at the edge
+costs a few beats, never the tracker's phase.
 
 A stalled source does not stop the dancer: in real-time mode, when no audio has
 arrived for ``stall_s`` the runtime feeds silence at the wall clock's pace, the
@@ -36,9 +41,8 @@ from .form import LiveForm
 from .sources import AudioSource, wait_for_audio
 
 
-# The first segment: cut after this much audio, its beats taken up to the edge of what was heard (the
-# tracker's usual 1.5 s of hindsight waived once), so that the first motion is ready within 2 s; the
-# later cuts keep to the ``segment_s`` grid, on sure beats.
+# The first segment: cut after this much audio, so that the first motion is ready within 2 s (its beats are
+# all guessed at the edge, even without ``edge``); each later cut comes ``segment_s`` after the one before.
 FIRST_SEGMENT_S = 1.8
 
 
@@ -56,9 +60,13 @@ class LiveConfig:
     repeat: str = "off"                # the song's form, as heard (live/form.py): same, mirror, vary or off
     vary: float = 0.5
     first_segment_s: float = FIRST_SEGMENT_S   # the first segment is cut this soon, on every beat heard so far
+    hindsight_s: float = LATENCY_S     # a cut takes the beats up to this long before what was heard for sure,
+    edge: bool = True                  # and dances the tracker's guess at those after, up to what was heard
 
     def __post_init__(self):
         check_repeat(self.repeat, self.vary)
+        if not (np.isfinite(self.hindsight_s) and self.hindsight_s >= 0.0):
+            raise InputError(f"the cuts' hindsight must be 0 s or more, got {self.hindsight_s!r}")
         if not (np.isfinite(self.first_segment_s) and self.first_segment_s >= 1.0):
             raise InputError(f"the first segment must be at least 1 s long, got {self.first_segment_s!r}")
         check_seed(self.seed)
@@ -180,21 +188,25 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
                 futures.pop(0).result()  # a failed step (a full disk) ends the dance now, not at the source's end
             if not ended and heard_s < next_cut:
                 continue
-            update = tracker.flush() if ended else tracker.update(until_s=heard_s if worker is None else None)
-            tempo = update.tempo_bpm or tempo
-            beats = np.asarray(update.beat_times_s, dtype=np.float64)
-            inten = np.asarray(update.intensity_db, dtype=np.float64)
-            bars, metre = np.asarray(update.beat_in_bar, dtype=np.int64), update.beats_per_bar
+            # The beats the tracker is sure of (given for good), then its guess at those since, up to what
+            # was heard (peeked: the next cut gets them again, surer, and keeps those after the last danced).
+            update = tracker.flush() if ended else tracker.update(until_s=heard_s - config.hindsight_s)
+            sure = _beats_of(update)
             if waiting is not None:
-                beats, inten, bars = (np.concatenate((a, b)) for a, b in zip(waiting, (beats, inten, bars)))
+                sure = tuple(np.concatenate((a, b)) for a, b in zip(waiting, sure))
                 waiting = None
-            # After the early first cut the cuts keep to the segment grid (a whole segment of audio each), as a
-            # stream without the early start would cut them.
-            next_cut = heard_s + config.segment_s if worker is not None or heard_s >= config.segment_s \
-                else config.segment_s
+            peek = (config.edge or worker is None) and not ended   # the first cut always: it cannot wait
+            edge = _beats_of(tracker.peek(heard_s) if peek else None)
+            beats, inten, bars = (np.concatenate((a, b)) for a, b in zip(sure, edge))
+            tempo, metre = update.tempo_bpm or tempo, update.beats_per_bar
+            if worker is not None:   # the beats danced already, as guessed at the last cut
+                keep = beats > prev_beat + 0.5 * (60.0 / tempo if tempo > 0 else 60.0 / FALLBACK_BPM)
+                beats, inten, bars = beats[keep], inten[keep], bars[keep]
+            # Each cut comes a segment of audio after the one before (the first, early): no beat waits longer.
+            next_cut = heard_s + config.segment_s
             if worker is None:
                 if beats.size < 2 and not ended:   # not enough beats yet to start: try again soon, with these
-                    waiting, next_cut = (beats, inten, bars), heard_s + 0.25
+                    waiting, next_cut = sure, heard_s + 0.25
                     continue
                 if beats.size == 0:
                     break
@@ -267,9 +279,8 @@ def run_live(source: AudioSource, on_frames: Callable[[MotionClip], None], *, co
 
 def segment_lead_s(segment_s: float, first_segment_s: float = FIRST_SEGMENT_S) -> float:
     """How long after the first segment's frames the last of the next segment's can arrive, relative to their
-    place in the dance: a segment later, less the first one's length, plus the beat tracker's hindsight
-    that the first segment waived."""
-    return max(0.0, segment_s + LATENCY_S - min(first_segment_s, segment_s))
+    place in the dance: a segment later, less the first one's length."""
+    return max(0.0, segment_s - min(first_segment_s, segment_s))
 
 
 def beat_delays(reports: list[SegmentReport]) -> dict:
@@ -278,6 +289,14 @@ def beat_delays(reports: list[SegmentReport]) -> dict:
     delays = [r.ready_s - t for r in reports[1:] for t in r.beat_times_s if t >= 0]
     return {"beat_delay_s_median": float(np.median(delays)) if delays else None,
             "beat_delay_s_max": float(np.max(delays)) if delays else None}
+
+
+def _beats_of(update) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """An update's beat times, intensities and bar positions (none for None)."""
+    if update is None:
+        return np.zeros(0), np.zeros(0), np.zeros(0, dtype=np.int64)
+    return (np.asarray(update.beat_times_s, dtype=np.float64), np.asarray(update.intensity_db, dtype=np.float64),
+            np.asarray(update.beat_in_bar, dtype=np.int64))
 
 
 def _signature(config: LiveConfig, db, style, graph):

@@ -12,7 +12,8 @@ stream that closes without a length as an error, a finished one too. A connectio
 breaks is resumed with an HTTP Range request where the server accepts them. The computer's sound
 comes through ffmpeg's device inputs (``device_input``): on Linux the PulseAudio (or PipeWire's
 pulse) server's monitor of the default output and its default input; ``pulse:NAME`` and
-``alsa:NAME`` name a source or device.
+``alsa:NAME`` name a source or device. ``PushedAudio`` is PCM handed over as it arrives (the web
+page's capture), read the same way.
 """
 
 from __future__ import annotations

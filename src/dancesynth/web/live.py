@@ -10,6 +10,10 @@ message, so a slow connection never slows the dance or the other viewers. A boun
 backlog (the last ``delay_s`` of audio, the frames and beats from there on) lets a
 viewer join late and still see motion and music in sync, at everyone's delay.
 
+A page may also send its own sound (a tab's or the microphone's, captured in the browser): then the
+socket carries PCM both ways, the broadcast dances to a ``PushedAudio`` the socket fills (``_receive``,
+within the bounds of CAPTURE_*), and nobody else can watch it; one per computer.
+
 Messages, in order: ``start`` (sample rate, fps, ``start_s`` the stream time of the
 first audio sample this viewer gets, ``delay_s`` how long to buffer before playing, the
 ``character``), binary 16-bit mono PCM, ``hierarchy`` once (the character's skeleton as a
@@ -31,12 +35,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import DanceSynthError
-from ..live.beats import LATENCY_S
 from ..types import MAX_SEED, SEGMENT_S
 from ..live.sources import SR, PushedAudio
 
-# Motion for stream time t is ready one segment plus the beat tracker's latency after t
-# arrives, plus the step; the margin covers the step and network jitter.
+# Motion for stream time t is ready at most one segment after t arrives (live/runtime.py), plus the step; the margin covers the step and network jitter.
 DELAY_MARGIN_S = 1.0
 MIN_JOIN_DELAY_S = 0.3
 # Audio goes to the viewers in pieces of at least this much: the source's own reads are ~20 ms, and
@@ -55,7 +57,7 @@ MAX_CAPTURE_S = 4 * 3600.0
 
 def playback_delay_s(segment_s: float) -> float:
     """How long a viewer buffers audio so the motion of each moment is there before it is heard."""
-    return segment_s + LATENCY_S + DELAY_MARGIN_S
+    return segment_s + DELAY_MARGIN_S
 
 
 @dataclass(eq=False)

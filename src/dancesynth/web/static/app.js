@@ -599,12 +599,17 @@ async function startCapture(kind) {
 		mine.ws.send(ev.data);
 		state.live.capture.sent_s = mine.capture.sent_s;
 	};
-	track.addEventListener('ended', () => {
-		if (live !== mine) return;
-		if (mine.ws.readyState === WebSocket.OPEN) mine.ws.send(JSON.stringify({ type: 'end' }));
-		setStatus(`You stopped sharing ${what}; the dance plays to the end of what was heard`);
-	});
+	track.addEventListener('ended', () => { if (live === mine) endCapture(mine); });
 	setStatus(`Sending ${what} to the server…`);
+}
+
+// The capture ends (the user stopped sharing, or pressed Stop): the server dances to the end of what it heard.
+function endCapture(mine) {
+	mine.capture.ended = true;
+	mine.capture.stream.getTracks().forEach((t) => t.stop());
+	if (mine.ws.readyState === WebSocket.OPEN) mine.ws.send(JSON.stringify({ type: 'end' }));
+	setStatus(`Stopped listening to ${CAPTURE_NAMES[mine.capture.kind]}; the dance goes on to the end of what was ` +
+		'heard (Stop again ends it now)');
 }
 
 function captureRefused(kind, err) {
@@ -676,6 +681,7 @@ function openLive(query, ctx, capture) {
 			state.live.server_late_s += m.late_s || 0;
 		} else if (m.type === 'end') {
 			state.live.state = 'ended';
+			state.live.summary = m.summary;
 			setStatus(`The ${capture ? 'capture' : 'stream'} ended: ${m.summary.segments} segments, style ` +
 				`${m.summary.style}; the dance plays to the end of the music`);
 		} else if (m.type === 'error') {
@@ -697,7 +703,11 @@ function openLive(query, ctx, capture) {
 $('live-controls').addEventListener('submit', startLive);
 $('live-tab').addEventListener('click', () => startCapture('tab'));
 $('live-mic').addEventListener('click', () => startCapture('mic'));
-$('stop-live').addEventListener('click', () => { stopLive(); setStatus('Stopped.'); });
+$('stop-live').addEventListener('click', () => {
+	if (live && live.capture && !live.capture.ended && live.ws.readyState === WebSocket.OPEN) { endCapture(live); return; }
+	stopLive();
+	setStatus('Stopped.');
+});
 audio.addEventListener('play', () => { if (live) stopLive(); });
 $('controls').addEventListener('submit', requestDance);
 $('figure').addEventListener('change', () => { wantedFigure = $('figure').value; updateView(); });
