@@ -594,7 +594,7 @@ async function startCapture(kind) {
 	const mine = openLive({ source: kind, rate: String(ctx.sampleRate) }, ctx,
 		{ kind, stream, node, echo, sent_s: 0 });
 	node.port.onmessage = (ev) => {
-		if (live !== mine || mine.ws.readyState !== WebSocket.OPEN) return;
+		if (live !== mine || mine.capture.ended || mine.ws.readyState !== WebSocket.OPEN) return;
 		mine.capture.sent_s += ev.data.byteLength / 2 / ctx.sampleRate;
 		mine.ws.send(ev.data);
 		state.live.capture.sent_s = mine.capture.sent_s;
