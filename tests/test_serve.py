@@ -71,6 +71,11 @@ def test_engines_and_characters_are_listed(server):
     engines = json.loads(data)
     assert status == 200 and [e["name"] for e in engines["engines"]] == list(ENGINES)
     assert engines["default"] == "streaming"
+    # What each engine can dance: the neural one only the genres it has a model of, the others any.
+    assert {e["name"]: e["genres"] for e in engines["engines"]} == {
+        "streaming": None, "global": None, "choreography": None, "neural": ["salsa"]}
+    status, _, data = request(server, "GET", "/api/limits")
+    assert status == 200 and json.loads(data) == {"max_upload_mb": MAX_UPLOAD_MB, "max_song_minutes": 15.0}
     status, _, data = request(server, "GET", "/api/characters")
     characters = json.loads(data)
     assert status == 200 and [c["name"] for c in characters["characters"]] == list(LAYOUTS)
@@ -194,6 +199,43 @@ def test_an_mp4_is_rendered_on_the_server_with_the_song(server, tmp_path):
     assert 'filename="sorohanro_-_solo-trumpet-06-mannequin.mp4"' in headers["content-disposition"]
     (tmp_path / "dance.mp4").write_bytes(mp4)
     assert_video_with_song(tmp_path / "dance.mp4")
+
+
+def test_a_render_can_be_cancelled_and_started_again(server):
+    """DELETE cancels a video (the page does when another dance takes the stage); a later POST starts afresh.
+    While it renders, the status estimates the seconds left."""
+    result = kept_dance(server)
+    video = result["video_url"] + "?figure=stick"
+    status, _, data = request(server, "POST", video)
+    assert status == 202
+    status, _, data = request(server, "DELETE", video)
+    assert status == 200 and json.loads(data)["state"] == "cancelled", data
+    status, _, data = request(server, "POST", video)
+    assert status == 202 and json.loads(data)["state"] in ("queued", "rendering")
+    seen_eta = []
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        job = json.loads(request(server, "GET", video)[2])
+        if job["state"] == "rendering" and job["eta_s"] is not None:
+            seen_eta.append(job["eta_s"])
+        if job["state"] not in ("queued", "rendering"):
+            break
+        time.sleep(0.1)
+    assert job["state"] == "done", job
+    assert seen_eta and min(seen_eta) >= 0, "no estimate of the time left was given while it rendered"
+
+
+def test_library_advice_for_the_command_line_is_reworded_for_the_page():
+    from pathlib import Path
+
+    from dancesynth.errors import InputError
+    from dancesynth.io.audio import _check_duration
+    from dancesynth.web.server import _for_the_page
+
+    with pytest.raises(InputError) as exc:
+        _check_duration(Path("long.ogg"), 20 * 60.0, 15 * 60.0, 0.1)
+    worded = _for_the_page(str(exc.value))
+    assert "--max-minutes" not in worded and "max_duration_s" not in worded and "cut the song" in worded
 
 
 @pytest.mark.parametrize("path, method, code, words", [

@@ -142,7 +142,7 @@ def test_the_page_dances_another_engine_on_a_rig_and_downloads_its_video(server,
     assert_dancing(tmp_path, "ab", figure="stick")
     video = report["video"]
     assert video["state"]["state"] == "done" and video["file_name"] == "sorohanro_-_solo-trumpet-06-mixamo.mp4"
-    assert any("rendering" in label or "waiting" in label for label in video["labels"]), video["labels"]
+    assert any("%" in label or "waiting" in label for label in video["labels"]), video["labels"]
     assert_video_with_song(tmp_path / "dance.mp4")
 
 

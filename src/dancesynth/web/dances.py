@@ -17,6 +17,7 @@ import re
 import shutil
 import tempfile
 import threading
+import time
 import uuid
 from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
@@ -34,7 +35,8 @@ RENDER_RETRY_S = 10   # a busy render queue asks the page to come back after thi
 
 @dataclass(eq=False)
 class Render:
-    """One MP4 being made: ``state`` goes queued -> rendering -> done (``path``) or error (``error``)."""
+    """One MP4 being made: ``state`` goes queued -> rendering -> done (``path``), error (``error``) or
+    cancelled (``cancel``: the page moved on to another dance, or the user asked)."""
 
     figure: str
     state: str = "queued"
@@ -42,11 +44,21 @@ class Render:
     total: int = 0
     error: str = ""
     path: Path | None = None
+    started: float | None = None   # time.monotonic() when it began rendering
 
     def status(self) -> dict:
         progress = self.done / self.total if self.total else 0.0
+        eta = None
+        if self.state == "rendering" and self.done and self.started is not None:
+            eta = round((time.monotonic() - self.started) / self.done * (self.total - self.done), 1)
         return {"state": self.state, "figure": self.figure, "frames_done": self.done, "frames": self.total,
-                "progress": round(1.0 if self.state == "done" else progress, 3), "error": self.error or None}
+                "progress": round(1.0 if self.state == "done" else progress, 3), "eta_s": eta,
+                "error": self.error or None}
+
+    def cancel(self) -> None:
+        """Stop it: a queued render never starts, a rendering one stops at its next frame (its file removed)."""
+        if self.state in ("queued", "rendering"):
+            self.state = "cancelled"
 
 
 @dataclass(eq=False)
@@ -133,14 +145,14 @@ class DanceStore:
         from ..export.video import render_video
 
         def progress(done: int, total: int) -> None:
-            if self._closing.is_set() or dance.forgotten:
+            if self._closing.is_set() or dance.forgotten or render.state == "cancelled":
                 raise _Stopped()  # render_video stops ffmpeg and removes its partial file
             render.done, render.total = done, total
 
         try:
-            if dance.forgotten:
+            if dance.forgotten or render.state == "cancelled":
                 raise _Stopped()
-            render.state = "rendering"
+            render.state, render.started = "rendering", time.monotonic()
             width, height = self.video_size
             render_video(dance.clip, song_path, out, width=width, height=height, character=dance.character,
                          figure=render.figure if dance.has_mesh else "stick", progress=progress)
@@ -149,7 +161,8 @@ class DanceStore:
             if dance.forgotten:  # forgotten while it rendered: nobody can fetch it
                 out.unlink(missing_ok=True)
         except _Stopped:
-            render.state, render.error = "error", "the dance was forgotten or the server is stopping"
+            if render.state != "cancelled":
+                render.state, render.error = "error", "the dance was forgotten or the server is stopping"
         except DanceSynthError as exc:
             # Name the song as the user knows it, not by where the server keeps it.
             render.state, render.error = "error", str(exc).replace(str(song_path), dance.title)

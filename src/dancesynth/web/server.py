@@ -44,6 +44,7 @@ from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket
 
 from ..errors import DanceSynthError, InputError
+from ..defaults import MAX_SONG_S
 from ..types import MAX_SEED
 from .dances import DOWNLOADS, FIGURES, RENDER_RETRY_S, VIDEO_SIZE, DanceStore, StoredDance
 from .live import MAX_CAPTURE_S, LiveHub, parse_seed, watch
@@ -152,6 +153,7 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
     ``video_size`` (width, height) pixels. A page's tab or microphone capture lasts at most ``max_capture_s``.
     """
     from ..api import ENGINES, DanceConfig, list_styles
+    from ..engines.neural.store import shipped_genres
     from ..motion.database import MotionDatabase, open_database
     from ..retarget.character import DEFAULT_CHARACTER
     from ..retarget.rigs import DESCRIPTIONS, LAYOUTS
@@ -167,6 +169,7 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
     kept = DanceStore(max_dances=max_stored_dances, max_renders=max_renders, max_waiting_renders=max_waiting_renders,
                       video_size=video_size)
     default_engine = DanceConfig().engine
+    engine_genres = {"neural": shipped_genres()}   # the neural engine dances the genres it has a model of
     styles_cache: list = []
     characters_cache: list = []
 
@@ -178,9 +181,19 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
             styles_cache.extend(await run_in_threadpool(list_styles, database))
         return JSONResponse({"styles": styles_cache})
 
+    async def api_limits(request: Request) -> Response:
+        """What the page tells the user before an upload: the largest file and the longest song."""
+        return JSONResponse({"max_upload_mb": max_upload_mb, "max_song_minutes": MAX_SONG_S / 60})
+
     async def api_engines(request: Request) -> Response:
-        engines = [{"name": e, "description": ENGINE_NOTES.get(e, "")} for e in ENGINES]
+        """The engines; ``genres``: the only genres an engine can dance here (null: any)."""
+        engines = [{"name": e, "description": ENGINE_NOTES.get(e, ""), "genres": engine_genres.get(e)} for e in ENGINES]
         return JSONResponse({"engines": engines, "default": default_engine})
+
+    async def style_genre(name: str) -> str | None:
+        if not styles_cache:
+            styles_cache.extend(await run_in_threadpool(list_styles, database))
+        return next((s["genre"] for s in styles_cache if s["name"] == name), None)
 
     async def api_characters(request: Request) -> Response:
         if not characters_cache:
@@ -245,6 +258,10 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
             engine = _text(form, "engine") or default_engine
             if engine not in ENGINES:
                 return _error(400, f"unknown engine {engine[:40]!r}; pick one of {', '.join(ENGINES)} (/api/engines)")
+            genres = engine_genres.get(engine)
+            if style and genres is not None and await style_genre(style) not in genres:
+                return _error(400, f"the {engine} engine has learned only {' and '.join(genres)} here; pick a "
+                                   f"{' or '.join(genres)} style (or the best match for the tempo), or another engine")
             character = _text(form, "character") or DEFAULT_CHARACTER
             if character not in LAYOUTS:  # built-ins only: a path would load a file from the server's disk
                 return _error(400, f"unknown character {character[:40]!r}; pick one of {', '.join(LAYOUTS)} "
@@ -272,7 +289,7 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
                 store.discard(upload_key)
             # Name the song as the user knows it, not by where the server keeps it.
             message = str(exc).replace(str(song_path), shown) if song_path else str(exc)
-            return _error(400 if isinstance(exc, InputError) else 500, message)
+            return _error(400 if isinstance(exc, InputError) else 500, _for_the_page(message))
         except BaseException:
             if upload_key:  # an internal error or a dropped request: the song will never be danced
                 store.discard(upload_key)
@@ -316,8 +333,9 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
                         headers={"Content-Disposition": f'attachment; filename="{dance.file_name(kind)}"'})
 
     async def api_video(request: Request) -> Response:
-        """POST starts rendering the dance's MP4 with its song (or joins the render under way); GET and
-        POST both answer how far it has got, with the file's URL once it is done."""
+        """POST starts rendering the dance's MP4 with its song (or joins the render under way); DELETE
+        cancels it; each answers how far it has got (``eta_s``: an estimate of the seconds left), with the
+        file's URL once it is done."""
         dance = kept_dance(request)
         if isinstance(dance, Response):
             return dance
@@ -325,7 +343,9 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
         if figure is None:
             return _error(400, f"figure must be one of {', '.join(FIGURES)}")
         render = dance.renders.get(figure)
-        if request.method == "POST" and (render is None or render.state == "error"):
+        if request.method == "DELETE" and render is not None:
+            render.cancel()
+        if request.method == "POST" and (render is None or render.state in ("error", "cancelled")):
             song, release = dance.song_path, lambda: None
             if dance.upload_key:  # an upload is kept while its video renders
                 song = store.hold(dance.upload_key)
@@ -365,10 +385,11 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
         Route("/api/uploads/{key}", api_upload),
         Route("/api/dance", api_dance, methods=["POST"]),
         Route("/api/engines", api_engines),
+        Route("/api/limits", api_limits),
         Route("/api/characters", api_characters),
         Route("/api/characters/{name}.glb", api_character_glb),
         Route("/api/dances/{key}/dance.{kind}", api_dance_file),
-        Route("/api/dances/{key}/video", api_video, methods=["GET", "POST"]),
+        Route("/api/dances/{key}/video", api_video, methods=["GET", "POST", "DELETE"]),
         Route("/api/live", api_live),
         WebSocketRoute("/ws/live", ws_live),
         Mount("/static", app=StaticFiles(directory=STATIC_DIR), name="static"),
@@ -390,6 +411,20 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
 
 
 _FIELDS = {"audio": "a file", "song": "text", "style": "text", "seed": "text", "engine": "text", "character": "text"}
+
+
+# The library's advice names command-line options; a page user gets what they can do in the page.
+_PAGE_WORDING = (
+    ("raise the limit (--max-minutes, or max_duration_s=) or cut the song", "cut the song (the limit is the server's)"),
+    ("(e.g. `ffmpeg -i IN out.wav`)", "(an audio converter or editor can)"),
+    ("down-mix the file first (`ffmpeg -i IN -ac 2 out.wav`)", "mix it down to stereo first (an audio editor can)"),
+)
+
+
+def _for_the_page(message: str) -> str:
+    for cli, page in _PAGE_WORDING:
+        message = message.replace(cli, page)
+    return message
 
 
 def _form_problem(form) -> str:

@@ -31,11 +31,16 @@ def user_dir() -> Path:
     return cache_dir() / "models" / "neural"
 
 
+def shipped_genres() -> list[str]:
+    """The genres a model is shipped for: what ``dance --engine neural`` can dance without ``--model``."""
+    return sorted(p.stem for p in SHIPPED.glob("*.pt"))
+
+
 def find_model(genre: str) -> Path:
     """The shipped model file for ``genre``."""
     if (SHIPPED / f"{genre}.pt").is_file():
         return SHIPPED / f"{genre}.pt"
-    shipped = sorted(p.stem for p in SHIPPED.glob("*.pt"))
+    shipped = shipped_genres()
     raise ModelError(f"no neural model is shipped for genre '{genre}' (shipped: {', '.join(shipped) or 'none'}); "
                      f"train one with 'dancesynth train --style {genre}' and dance with --model, or dance another "
                      "style")

@@ -21,6 +21,14 @@ function setStatus(text, isError = false) {
 	statusLine.classList.toggle('error', isError);
 }
 
+// A message about something the user did (a download, a video) that the playback line would overwrite:
+// it stays until the next thing the user does.
+function notify(text, isError = false) {
+	const notice = $('notice');
+	notice.textContent = text;
+	notice.classList.toggle('error', isError);
+}
+
 // ---- scene ----------------------------------------------------------------------------
 const canvas = $('view');
 const renderer = new THREE.WebGLRenderer({ canvas, antialias: true });
@@ -267,7 +275,11 @@ function followPlayback() {
 async function readJSON(response) {
 	let body = null;
 	try { body = await response.json(); } catch { body = null; }
-	if (!response.ok) throw new Error((body && body.error) || `${response.status} ${response.statusText}`);
+	if (!response.ok) {
+		const error = new Error((body && body.error) || `${response.status} ${response.statusText}`);
+		error.status = response.status;
+		throw error;
+	}
 	return body;
 }
 
@@ -308,18 +320,41 @@ let characterInfo = {}; // the built-in characters by name: { name, description,
 // A character's name in the menus: a rig without a mesh dances as a stick figure.
 const characterLabel = (c) => (c.mesh ? c.name : `${c.name} rig (stick figure)`);
 
+// The genres each engine can dance here (null: any), and each style's genre: the menus offer only what works.
+const engineGenres = {};
+const styleGenre = {};
+
+function fitChoices() {
+	const genres = engineGenres[$('engine').value];
+	for (const option of $('style').options) {
+		option.disabled = Boolean(option.value && genres && !genres.includes(styleGenre[option.value]));
+	}
+	if ($('style').selectedOptions[0] && $('style').selectedOptions[0].disabled) $('style').value = '';
+	const genre = styleGenre[$('style').value];
+	for (const option of $('engine').options) {
+		const only = engineGenres[option.value];
+		option.disabled = Boolean(genre && only && !only.includes(genre));
+		option.title = option.title.replace(/ \(learned only .*\)$/, '') +
+			(option.disabled ? ` (learned only ${only.join(', ')})` : '');
+	}
+}
+
 async function loadChoices() {
-	const [songs, styles, engines, characters] = await Promise.all(
-		['/api/songs', '/api/styles', '/api/engines', '/api/characters'].map((url) => getJSON(url)));
+	const [songs, styles, engines, characters, limits] = await Promise.all(
+		['/api/songs', '/api/styles', '/api/engines', '/api/characters', '/api/limits'].map((url) => getJSON(url)));
+	state.limits = limits;
+	$('limits').textContent = `(up to ${limits.max_upload_mb} MB, ${limits.max_song_minutes} min; or drop it on the stage)`;
 	for (const s of songs.songs) $('song').add(new Option(s.title, s.name));
 	for (const s of styles.styles) {
 		const tempo = `${Math.round(s.tempo_min_bpm)}-${Math.round(s.tempo_max_bpm)} bpm`;
 		$('style').add(new Option(`${s.name} (${s.genre}, ${tempo})`, s.name));
+		styleGenre[s.name] = s.genre;
 	}
 	for (const e of engines.engines) {
 		const option = new Option(e.name + (e.name === engines.default ? ' (default)' : ''), e.name);
 		option.title = e.description;
 		$('engine').add(option);
+		engineGenres[e.name] = e.genres;
 	}
 	$('engine').value = engines.default;
 	for (const c of characters.characters) {
@@ -332,16 +367,25 @@ async function loadChoices() {
 	$('character').value = $('live-character').value = characters.default;
 	characterInfo = Object.fromEntries(characters.characters.map((c) => [c.name, c]));
 	if (songs.songs.length) $('song').value = songs.songs[0].name;
+	fitChoices();
 }
+
+const PREVIOUS = 'Still on stage, the previous dance: ';
 
 async function requestDance(event) {
 	event.preventDefault();
+	notify('');
 	const form = new FormData();
 	const file = $('file').files[0];
 	if (file && !$('song').value) form.append('audio', file);
 	else if ($('song').value) form.append('song', $('song').value);
 	else if (file) form.append('audio', file);
 	else { setStatus('Pick a song or choose an audio file.', true); return; }
+	if (form.has('audio') && file.size > state.limits.max_upload_mb * 2 ** 20) {
+		setStatus(`${file.name} is ${(file.size / 2 ** 20).toFixed(1)} MB; this server takes files up to ` +
+			`${state.limits.max_upload_mb} MB: cut or compress it first.`, true);
+		return;
+	}
 	for (const field of ['style', 'seed', 'engine', 'character']) form.append(field, $(field).value);
 	$('dance').disabled = true;
 	state.state = 'dancing';
@@ -357,6 +401,7 @@ async function requestDance(event) {
 		}
 		state.timings.figures_ms = performance.now() - t0 - state.timings.dance_ms;
 		stopLive();
+		if (videoJob) cancelVideo(videoJob); // the video of the dance that leaves the stage is not wanted
 		showDance({ figures, beats: result.beats, sections: result.sections, duration: result.duration_s, result });
 		offerFigures(Boolean(figures.character));
 		offerDownloads(result);
@@ -380,6 +425,10 @@ async function requestDance(event) {
 		state.state = 'error';
 		state.error = String(err.message || err);
 		setStatus(`Could not dance: ${state.error}`, true);
+		// What is on stage is not the dance asked for: say so, rather than let it pass for the result.
+		if (dance && dance.result && !$('info').textContent.startsWith(PREVIOUS)) {
+			$('info').textContent = PREVIOUS + $('info').textContent;
+		}
 	} finally {
 		$('dance').disabled = false;
 	}
@@ -407,47 +456,97 @@ function offerDownloads(result) {
 }
 
 // The server renders the MP4 with the song (a while for a long song): start it, show how far it has
-// got on the button, and download it when it is done.
+// got on the button (with an estimate of the time left), and download it when it is done. Only the
+// dance on stage gets its video: dancing another one cancels the render, and so does a second click.
+let videoJob = null; // { result, url, cancelled }
+
 async function downloadVideo() {
 	const result = dance && dance.result;
 	if (!result) return;
+	if (videoJob && videoJob.result === result) { cancelVideo(videoJob); return; }
+	notify('');
 	const button = $('dl-mp4');
 	const url = `${result.video_url}?figure=${state.view === 'stick' ? 'stick' : 'character'}`;
-	const mine = result;
-	const show = (text) => { if (dance && dance.result === mine) button.textContent = text; };
-	button.disabled = true;
+	const job = (videoJob = { result, url, cancelled: false });
+	const current = () => !job.cancelled && dance && dance.result === result;
+	const show = (text) => { if (current()) button.textContent = text; };
+	button.title = 'click again to cancel';
 	state.video = { state: 'starting', progress: 0, error: null };
 	show('MP4: starting…');
 	try {
 		const giveUp = performance.now() + RENDER_WAIT_MS;
-		let job = await fetchRetrying(url, { method: 'POST' }, (wait) =>
+		let status = await fetchRetrying(url, { method: 'POST' }, (wait) =>
 			show(wait ? `MP4: the server is busy, again in ${Math.round(wait / 1000)} s` : 'MP4: starting…'));
 		let moved = { at: performance.now(), key: '' };
-		while (['queued', 'rendering'].includes(job.state)) {
-			state.video = { state: job.state, progress: job.progress, error: null };
-			show(job.state === 'queued' ? 'MP4: waiting for a turn…' : `MP4: rendering… ${Math.round(100 * job.progress)}%`);
-			const key = `${job.state} ${job.frames_done}`;
+		while (['queued', 'rendering'].includes(status.state)) {
+			if (!current()) { if (!job.cancelled) cancelVideo(job); return; } // another dance is on stage now
+			state.video = { state: status.state, progress: status.progress, error: null, eta_s: status.eta_s };
+			const left = status.eta_s === null || status.eta_s === undefined ? '' : `, ~${Math.ceil(status.eta_s)} s left`;
+			show(status.state === 'queued' ? 'MP4: waiting for a turn… (cancel)' :
+				`MP4: ${Math.round(100 * status.progress)}%${left} (cancel)`);
+			const key = `${status.state} ${status.frames_done}`;
 			if (key !== moved.key) moved = { at: performance.now(), key };
-			if (job.state === 'rendering' && performance.now() - moved.at > STALL_MS) {
+			if (status.state === 'rendering' && performance.now() - moved.at > STALL_MS) {
 				throw new Error('the render stopped moving on; try again later');
 			}
 			if (performance.now() > giveUp) throw new Error('the video took too long; try again later');
 			await sleep(POLL_MS);
-			job = await getJSON(url);
+			status = await getJSON(url);
 		}
-		if (job.state !== 'done') throw new Error(job.error || `the video ended as ${job.state}`);
-		state.video = { state: 'done', progress: 1, error: null, url: job.url };
+		if (!current()) return;
+		if (status.state !== 'done') throw new Error(status.error || `the video ended as ${status.state}`);
+		state.video = { state: 'done', progress: 1, error: null, url: status.url, dance_id: result.dance_id };
 		show('MP4 ✓');
+		button.title = '';
 		const link = document.createElement('a');
-		link.href = job.url;
+		link.href = status.url;
 		link.download = '';
 		link.click();
 	} catch (err) {
+		if (!current()) return;
 		state.video = { state: 'error', progress: 0, error: String(err.message || err) };
+		if (err.status === 404) { danceGone(); return; }
 		show('MP4 (failed: try again)');
 		button.title = state.video.error;
 	} finally {
-		if (dance && dance.result === mine) button.disabled = false;
+		if (videoJob === job) videoJob = null;
+	}
+}
+
+function cancelVideo(job) {
+	job.cancelled = true;
+	fetch(job.url, { method: 'DELETE' }).catch(() => {});
+	if (dance && dance.result === job.result) {
+		state.video = { state: 'cancelled', progress: 0, error: null };
+		$('dl-mp4').textContent = 'MP4';
+		$('dl-mp4').title = '';
+		notify('The video was cancelled.');
+	}
+}
+
+// The server keeps only its latest dances: one it has let go of cannot be downloaded any more.
+function danceGone() {
+	offerDownloads(null);
+	state.video = { state: 'gone', progress: 0, error: null };
+	notify('The server keeps only its latest dances and has let this one go: press Dance to make it again ' +
+		'(its files come with it).', true);
+}
+
+// A file link is checked before the browser saves it: a dance the server has let go of would otherwise
+// save nothing and say nothing.
+async function downloadFile(event) {
+	const link = event.currentTarget;
+	if (link.dataset.checked === 'yes') { link.dataset.checked = ''; return; } // checked: let the browser save it
+	event.preventDefault();
+	if (link.getAttribute('aria-disabled') === 'true' || !link.href) return;
+	try {
+		const response = await fetch(link.href, { method: 'HEAD' });
+		if (response.status === 404) { danceGone(); return; }
+		if (!response.ok) throw new Error(`HTTP ${response.status}`);
+		link.dataset.checked = 'yes';
+		link.click();
+	} catch (err) {
+		notify(`Could not download the ${link.textContent}: ${err.message || err}`, true);
 	}
 }
 
@@ -468,6 +567,7 @@ const QUIET = { echoCancellation: false, noiseSuppression: false, autoGainContro
 
 function stopLive() {
 	state.capturing = null; // a capture still waiting for the user's choice is not started
+	$('engine').disabled = false;
 	if (!live) return;
 	live.ws.onmessage = live.ws.onclose = null;
 	live.ws.close();
@@ -530,6 +630,7 @@ function liveModelFailed(why) {
 
 function startLive(event) {
 	event.preventDefault();
+	notify('');
 	stopLive();
 	audio.pause();
 	const url = $('live-url').value.trim();
@@ -541,6 +642,7 @@ function startLive(event) {
 // Dance to a tab's sound or the microphone. The browser asks the user first; the audio context is made
 // here, in the click, so the browser lets it play.
 async function startCapture(kind) {
+	notify('');
 	stopLive();
 	audio.pause();
 	const what = CAPTURE_NAMES[kind];
@@ -633,6 +735,7 @@ function openLive(query, ctx, capture) {
 		seed: $('seed').value, character });
 	const ws = new WebSocket(`${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws/live?${params}`);
 	ws.binaryType = 'arraybuffer';
+	$('engine').disabled = true; // live is always the streaming engine
 	const out = ctx.createGain();
 	out.gain.value = capture && !capture.echo ? 0 : 1;
 	out.connect(ctx.destination);
@@ -712,7 +815,28 @@ audio.addEventListener('play', () => { if (live) stopLive(); });
 $('controls').addEventListener('submit', requestDance);
 $('figure').addEventListener('change', () => { wantedFigure = $('figure').value; updateView(); });
 $('dl-mp4').addEventListener('click', downloadVideo);
+for (const kind of ['bvh', 'glb', 'vrma']) $(`dl-${kind}`).addEventListener('click', downloadFile);
+$('engine').addEventListener('change', fitChoices);
+$('style').addEventListener('change', fitChoices);
 $('file').addEventListener('change', () => { if ($('file').files.length) $('song').value = ''; });
+// A song dropped anywhere on the page is danced at once, as if chosen and Dance pressed.
+document.addEventListener('dragover', (ev) => {
+	if (![...ev.dataTransfer.types].includes('Files')) return;
+	ev.preventDefault();
+	document.body.classList.add('dropping');
+});
+document.addEventListener('dragleave', (ev) => { if (!ev.relatedTarget) document.body.classList.remove('dropping'); });
+document.addEventListener('drop', (ev) => {
+	document.body.classList.remove('dropping');
+	if (!ev.dataTransfer.files.length) return;
+	ev.preventDefault();
+	$('file').files = ev.dataTransfer.files;
+	$('song').value = '';
+	$('controls').requestSubmit();
+});
+
+// The live controls are folded away on a small screen (the stage needs the room), open on a large one.
+$('live-panel').open = window.matchMedia('(min-width: 700px)').matches;
 const tLoad = performance.now();
 loadChoices().then(() => {
 	state.timings.choices_ms = performance.now() - tLoad;

@@ -1,0 +1,156 @@
+// The page's dance-studio behaviours in headless Chromium, one scenario a run:
+//     node tests/clients/studio_check.mjs URL OUT_DIR SCENARIO [CHROMIUM]
+// stale-video: MP4 of a long song, then dance a short one and ask for its MP4: which file is saved, and
+//              what became of the first render;
+// neural-styles: the style and engine menus with the neural engine and with a style it has not learned;
+// gone: dance, let the server forget it (two more dances through the API), then press BVH and MP4;
+// error-keeps-label: dance, then ask for one that fails: what the info line says;
+// small-things: the limits shown before an upload, a file dropped on the page, one too large, the engine
+//         menu during live, the controls' accessible names;
+// layout: at 390x844 (a phone) and 1280x800, before and after a dance: the page's width against the
+//         window's, and where the stage is (layout-390x844.png, ...).
+// Prints one JSON report; every wait is bounded.
+import { launchChromium } from './headless.mjs';
+
+const [url, outDir, scenario, executablePath = '/usr/bin/chromium'] = process.argv.slice(2);
+const report = { ok: false, errors: [], console: [], scenario };
+let browser;
+try {
+	browser = await launchChromium(executablePath, ['--autoplay-policy=no-user-gesture-required', '--mute-audio']);
+	const page = await browser.newPage({ viewport: { width: 1280, height: 800 }, acceptDownloads: true });
+	page.setDefaultTimeout(20000);
+	page.on('pageerror', (e) => report.errors.push(`pageerror: ${e.message}`));
+	page.on('console', (m) => { if (m.type() === 'error' && !/404|400/.test(m.text())) report.console.push(m.text()); });
+	const statusText = () => page.evaluate(() => document.getElementById('status').textContent);
+	await page.goto(url, { waitUntil: 'load' });
+	await page.waitForFunction(() => window.dancesynth && window.dancesynth.state === 'idle', null, { timeout: 30000 });
+	const songValue = (part) => page.evaluate((p) => [...document.querySelectorAll('#song option')]
+		.find((o) => o.value.includes(p)).value, part);
+	const danceSong = async (part) => {
+		await page.selectOption('#song', await songValue(part));
+		const before = await page.evaluate(() => window.dancesynth.dance && window.dancesynth.dance.id);
+		await page.click('#dance');
+		await page.waitForFunction((b) => ['ready', 'error'].includes(window.dancesynth.state) &&
+			(window.dancesynth.state === 'error' || (window.dancesynth.dance && window.dancesynth.dance.id !== b)),
+		before, { timeout: 90000 });
+		return page.evaluate(() => ({ ...window.dancesynth.dance, state: window.dancesynth.state }));
+	};
+
+	if (scenario === 'stale-video') {
+		const first = await danceSong('Vibe_Ace');
+		await page.click('#dl-mp4');
+		await page.waitForFunction(() => window.dancesynth.video && ['queued', 'rendering']
+			.includes(window.dancesynth.video.state), null, { timeout: 30000 });
+		const second = await danceSong('trumpet');
+		const download = page.waitForEvent('download', { timeout: 120000 });
+		await page.click('#dl-mp4');
+		const file = await download;
+		report.first_id = first.id;
+		report.second_id = second.id;
+		report.saved = file.suggestedFilename();
+		report.first_render = await page.evaluate((id) => fetch(`/api/dances/${id}/video?figure=character`)
+			.then((r) => r.json()), first.id);
+		report.video = await page.evaluate(() => window.dancesynth.video);
+	} else if (scenario === 'neural-styles') {
+		const menus = () => page.evaluate(() => ({
+			styles: [...document.querySelectorAll('#style option')].map((o) => ({ value: o.value, disabled: o.disabled })),
+			engines: [...document.querySelectorAll('#engine option')].map((o) => ({ value: o.value, disabled: o.disabled })),
+			style: document.getElementById('style').value }));
+		report.at_start = await menus();
+		await page.selectOption('#engine', 'neural');
+		report.with_neural = await menus();
+		await page.selectOption('#engine', 'streaming');
+		const other = report.at_start.styles.find((s) => s.value && !s.value.startsWith('salsa'));
+		await page.selectOption('#style', other.value);
+		report.with_other_style = await menus();
+		report.api = await page.evaluate((style) => {
+			const form = new FormData();
+			for (const [k, v] of Object.entries({ song: document.getElementById('song').value, engine: 'neural', style })) {
+				form.append(k, v);
+			}
+			return fetch('/api/dance', { method: 'POST', body: form }).then(async (r) => ({ status: r.status, body: await r.json() }));
+		}, other.value);
+	} else if (scenario === 'gone') {
+		await danceSong('trumpet');
+		await page.evaluate(async () => { // two more dances than the server keeps: the one on stage is let go
+			for (let i = 0; i < 2; i++) {
+				const form = new FormData();
+				form.append('song', document.getElementById('song').value);
+				form.append('seed', String(i + 1));
+				await fetch('/api/dance', { method: 'POST', body: form });
+			}
+		});
+		let saved = null;
+		page.on('download', (d) => { saved = d.suggestedFilename(); });
+		await page.click('#dl-bvh');
+		await page.waitForFunction(() => document.getElementById('notice').classList.contains('error'), null,
+			{ timeout: 10000 });
+		report.after_bvh = await page.evaluate(() => document.getElementById('notice').textContent);
+		report.links = await page.evaluate(() => ['bvh', 'glb', 'vrma'].map((k) =>
+			document.getElementById(`dl-${k}`).getAttribute('aria-disabled')));
+		report.mp4_disabled = await page.evaluate(() => document.getElementById('dl-mp4').disabled);
+		await page.waitForTimeout(500);
+		report.saved = saved;
+	} else if (scenario === 'error-keeps-label') {
+		await danceSong('trumpet');
+		report.info_before = await page.evaluate(() => document.getElementById('info').textContent);
+		await page.fill('#seed', '-5');
+		await page.click('#dance');
+		await page.waitForFunction(() => window.dancesynth.state === 'error', null, { timeout: 30000 });
+		report.status = await statusText();
+		report.info_after = await page.evaluate(() => document.getElementById('info').textContent);
+	} else if (scenario === 'small-things') {
+		report.limits = await page.evaluate(() => document.getElementById('limits').textContent);
+		const drop = (size, name) => page.evaluate(async ([size, name]) => {
+			const bytes = size ? new Uint8Array(size) : await (await fetch(`/api/songs/${encodeURIComponent(
+				[...document.querySelectorAll('#song option')].find((o) => o.value.includes('trumpet')).value)}`)).arrayBuffer();
+			const dt = new DataTransfer();
+			dt.items.add(new File([bytes], name, { type: 'audio/ogg' }));
+			document.dispatchEvent(new DragEvent('drop', { dataTransfer: dt, bubbles: true, cancelable: true }));
+		}, [size, name]);
+		let uploads = 0;
+		page.on('request', (r) => { if (r.url().endsWith('/api/dance')) uploads += 1; });
+		await drop(51 * 2 ** 20, 'huge.ogg');
+		await page.waitForTimeout(300);
+		report.too_large = { status: await statusText(), uploads };
+		await drop(0, 'my song.ogg');
+		await page.waitForFunction(() => ['ready', 'error'].includes(window.dancesynth.state) && window.dancesynth.dance,
+			null, { timeout: 60000 });
+		report.dropped = await page.evaluate(() => ({ state: window.dancesynth.state, song: document.getElementById('song').value,
+			file: document.getElementById('file').files[0] && document.getElementById('file').files[0].name,
+			audio: document.getElementById('audio').src }));
+		await page.fill('#live-url', 'http://127.0.0.1:9/nothing.ogg');
+		await page.click('#go-live');
+		report.engine_disabled_live = await page.evaluate(() => document.getElementById('engine').disabled);
+		await page.click('#stop-live');
+		report.engine_disabled_after = await page.evaluate(() => document.getElementById('engine').disabled);
+		report.names = await page.evaluate(() => [...document.querySelectorAll('select, input, button, a[id^="dl-"]')]
+			.map((e) => (e.getAttribute('aria-label') || (e.closest('label') && e.closest('label').textContent) ||
+				e.textContent || '').trim().replace(/\s+/g, ' ')));
+	} else if (scenario === 'layout') {
+		report.sizes = {};
+		for (const [width, height] of [[390, 844], [1280, 800]]) {
+			await page.setViewportSize({ width, height });
+			await page.reload({ waitUntil: 'load' });   // as a phone opens it
+			await page.waitForFunction(() => window.dancesynth && window.dancesynth.state === 'idle', null,
+				{ timeout: 30000 });
+			const measure = () => page.evaluate(() => ({
+				scroll_width: document.documentElement.scrollWidth, window_width: window.innerWidth,
+				stage: document.getElementById('stage').getBoundingClientRect().toJSON(),
+				live_open: document.getElementById('live-panel').open }));
+			const idle = await measure();
+			await danceSong('trumpet');
+			report.sizes[`${width}x${height}`] = { idle, dancing: await measure() };
+			await page.screenshot({ path: `${outDir}/layout-${width}x${height}.png` });
+		}
+	} else {
+		throw new Error(`unknown scenario ${scenario}`);
+	}
+	await page.screenshot({ path: `${outDir}/page.png` });
+	report.ok = true;
+} catch (e) {
+	report.errors.push(`exception: ${e && e.stack ? e.stack : e}`);
+} finally {
+	if (browser) await browser.close().catch(() => {});
+}
+process.stdout.write(JSON.stringify(report));

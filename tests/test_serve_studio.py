@@ -1,0 +1,106 @@
+"""The page as a dance studio (issue 34), each behaviour in headless Chromium against the real server:
+only the dance on stage gets its video, the menus offer only what works, a dance the server let go of
+says so, a failed dance does not pass for the one on stage."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from serve_support import CLIENTS, VIDEO_SIZE
+from servers import uvicorn_server
+from test_serve_page import needs_browser
+
+SHOTS = Path("/tmp/web_shots")
+
+
+@pytest.fixture(scope="module")
+def studio():
+    """A server that keeps two dances (so a test can make it let one go) and renders small videos."""
+    from dancesynth.web.server import create_app
+
+    with uvicorn_server(create_app(max_stored_dances=2, video_size=VIDEO_SIZE)) as address:
+        yield address
+
+
+def run_studio(server, tmp_path, scenario) -> dict:
+    chromium = "/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else shutil.which("chromium")
+    proc = subprocess.run(["node", str(CLIENTS / "studio_check.mjs"), f"http://{server[0]}:{server[1]}/",
+                           str(tmp_path), scenario, chromium], capture_output=True, text=True, timeout=300,
+                          cwd=CLIENTS)
+    shutil.copytree(tmp_path, SHOTS / tmp_path.name, dirs_exist_ok=True)
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads(proc.stdout)
+    assert report["ok"] and not report["errors"] and not report["console"], report
+    return report
+
+
+@needs_browser
+def test_only_the_dance_on_stage_gets_its_video(studio, tmp_path):
+    """An MP4 asked for, then another song danced and its MP4 asked for: the file saved is the new song's,
+    and the first render was cancelled (it does not hold the queue for a video nobody wants)."""
+    report = run_studio(studio, tmp_path, "stale-video")
+    assert report["saved"].startswith("sorohanro_-_solo-trumpet"), report
+    assert report["first_render"]["state"] == "cancelled", report["first_render"]
+    assert report["video"]["state"] == "done" and report["video"]["dance_id"] == report["second_id"]
+
+
+@needs_browser
+def test_the_menus_offer_only_what_the_engines_can_dance(studio, tmp_path):
+    report = run_studio(studio, tmp_path, "neural-styles")
+    with_neural = {s["value"]: s["disabled"] for s in report["with_neural"]["styles"] if s["value"]}
+    assert not any(d for v, d in with_neural.items() if v.startswith("salsa")), with_neural
+    assert all(d for v, d in with_neural.items() if not v.startswith("salsa")), with_neural
+    engines = {e["value"]: e["disabled"] for e in report["with_other_style"]["engines"]}
+    assert engines["neural"] and not engines["streaming"], engines
+    # The API refuses the combination with a reason a page user can act on (400, not 500).
+    assert report["api"]["status"] == 400, report["api"]
+    assert "learned only salsa" in report["api"]["body"]["error"] and "dancesynth train" not in \
+        report["api"]["body"]["error"]
+
+
+@needs_browser
+def test_a_dance_the_server_let_go_of_says_so(studio, tmp_path):
+    report = run_studio(studio, tmp_path, "gone")
+    assert "let this one go" in report["after_bvh"] and "press Dance" in report["after_bvh"], report
+    assert report["links"] == ["true", "true", "true"] and report["mp4_disabled"], report
+    assert report["saved"] is None, "an empty or error file was saved"
+
+
+@needs_browser
+def test_a_failed_dance_does_not_pass_for_the_one_on_stage(studio, tmp_path):
+    report = run_studio(studio, tmp_path, "error-keeps-label")
+    assert "Could not dance" in report["status"] and "seed" in report["status"], report
+    assert report["info_after"].startswith("Still on stage, the previous dance: "), report
+    assert report["info_after"].endswith(report["info_before"])
+
+
+@needs_browser
+def test_the_page_fits_a_phone_and_a_desktop(studio, tmp_path):
+    """At 390x844 nothing scrolls sideways and the stage has most of the screen (the live controls folded
+    away); at 1280x800 likewise, before and after a dance."""
+    report = run_studio(studio, tmp_path, "layout")
+    for size, states in report["sizes"].items():
+        height = int(size.split("x")[1])
+        for name, m in states.items():
+            assert m["scroll_width"] <= m["window_width"], (size, name, m)
+            assert m["stage"]["height"] >= 0.55 * height, (size, name, m)
+
+
+@needs_browser
+def test_limits_drop_live_engine_and_names(studio, tmp_path):
+    """The limits are on the page before an upload; a dropped song is danced, one over the limit is refused
+    before it is sent; the engine menu is off while live is on (live is always the streaming engine); no two
+    controls share an accessible name."""
+    report = run_studio(studio, tmp_path, "small-things")
+    assert "50 MB" in report["limits"] and "15 min" in report["limits"], report["limits"]
+    assert "takes files up to 50 MB" in report["too_large"]["status"] and report["too_large"]["uploads"] == 0
+    assert report["dropped"]["state"] == "ready" and report["dropped"]["file"] == "my song.ogg", report["dropped"]
+    assert "/api/uploads/" in report["dropped"]["audio"]
+    assert report["engine_disabled_live"] and not report["engine_disabled_after"]
+    names = [n for n in report["names"] if n]
+    assert len(names) == len(set(names)), sorted(names)
