@@ -104,3 +104,16 @@ def test_limits_drop_live_engine_and_names(studio, tmp_path):
     assert report["engine_disabled_live"] and not report["engine_disabled_after"]
     names = [n for n in report["names"] if n]
     assert len(names) == len(set(names)), sorted(names)
+
+
+@needs_browser
+def test_the_dancer_fills_the_stage_while_playing_and_right_after_seeks(studio, tmp_path):
+    """At a phone's and a desktop's size, at 10 moments of play and 10 right after seeks: the dancer's box
+    (her bones on screen) is at least 40 % of the stage's height and inside it (the camera aims where she
+    is around each moment, so a seek does not leave her at the edge)."""
+    report = run_studio(studio, tmp_path, "framing")
+    for size, boxes in report["sizes"].items():
+        assert len(boxes) == 20
+        for box in boxes:
+            assert box["height"] >= 0.40, (size, box)
+            assert box["left"] > 0.0 and box["right"] < 1.0 and box["top"] > 0.0 and box["bottom"] < 1.0, (size, box)

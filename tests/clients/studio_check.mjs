@@ -7,6 +7,8 @@
 // error-keeps-label: dance, then ask for one that fails: what the info line says;
 // small-things: the limits shown before an upload, a file dropped on the page, one too large, the engine
 //         menu during live, the controls' accessible names;
+// framing: at 390x844 and 1280x800, 10 moments of Vibe Ace as it plays and 10 right after seeks: the
+//         dancer's box on the stage (window.dancesynthFrame) at each (framing-*.png: the last one);
 // layout: at 390x844 (a phone) and 1280x800, before and after a dance: the page's width against the
 //         window's, and where the stage is (layout-390x844.png, ...).
 // Prints one JSON report; every wait is bounded.
@@ -127,6 +129,31 @@ try {
 		report.names = await page.evaluate(() => [...document.querySelectorAll('select, input, button, a[id^="dl-"]')]
 			.map((e) => (e.getAttribute('aria-label') || (e.closest('label') && e.closest('label').textContent) ||
 				e.textContent || '').trim().replace(/\s+/g, ' ')));
+	} else if (scenario === 'framing') {
+		report.sizes = {};
+		for (const [width, height] of [[390, 844], [1280, 800]]) {
+			await page.setViewportSize({ width, height });
+			await page.reload({ waitUntil: 'load' });
+			await page.waitForFunction(() => window.dancesynth && window.dancesynth.state === 'idle', null,
+				{ timeout: 30000 });
+			await danceSong('Vibe_Ace');
+			const boxes = [];
+			const nextFrames = () => page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
+			await page.evaluate(() => { const a = document.getElementById('audio'); a.currentTime = 20; return a.play(); });
+			for (let i = 0; i < 10; i++) {
+				await page.waitForTimeout(300);
+				boxes.push({ kind: 'playing', t: await page.evaluate(() => document.getElementById('audio').currentTime),
+					...await page.evaluate(() => window.dancesynthFrame()) });
+			}
+			for (const t of [55, 3, 40, 12, 30, 58, 8, 47, 25, 35]) {
+				await page.evaluate((s) => { document.getElementById('audio').currentTime = s; }, t);
+				await page.waitForFunction((s) => Math.abs(document.getElementById('audio').currentTime - s) < 0.5, t);
+				await nextFrames();
+				boxes.push({ kind: 'seek', t, ...await page.evaluate(() => window.dancesynthFrame()) });
+			}
+			report.sizes[`${width}x${height}`] = boxes;
+			await page.screenshot({ path: `${outDir}/framing-${width}x${height}.png` });
+		}
 	} else if (scenario === 'layout') {
 		report.sizes = {};
 		for (const [width, height] of [[390, 844], [1280, 800]]) {

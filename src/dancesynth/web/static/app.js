@@ -36,7 +36,7 @@ renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
 const scene = new THREE.Scene();
 scene.background = new THREE.Color(0x1d2028);
 const camera = new THREE.PerspectiveCamera(45, 1, 0.05, 100);
-camera.position.set(1.9, 1.55, 3.1);
+camera.position.set(1.5, 1.4, 2.5); // VIEWS['three-quarter'] from the target: the dancer fills most of the height
 const controls = new OrbitControls(camera, canvas);
 controls.target.set(0, 0.9, 0);
 controls.update();
@@ -190,14 +190,71 @@ function poseAt(fig, t) {
 		mesh.position.addVectors(_a, _b).multiplyScalar(0.5);
 		if (len > 1e-6) mesh.quaternion.setFromUnitVectors(_up, _dir.divideScalar(len));
 	}
-	// Follow the dancer: the ring stays under the hips, the camera keeps its offset.
+	// The ring stays under the hips; the camera (unless the view is free) keeps its offset from where the
+	// hips are on average over the moments around this one: it is there at once after a seek, and it
+	// moves with a step before the step is made rather than after.
 	fig.hips.getWorldPosition(_a);
 	ring.position.x = _a.x;
 	ring.position.z = _a.z;
-	const dx = (_a.x - controls.target.x) * 0.05, dz = (_a.z - controls.target.z) * 0.05;
-	controls.target.x += dx; controls.target.z += dz;
-	camera.position.x += dx; camera.position.z += dz;
+	if ($('camera-view').value !== 'free') {
+		const [x, z] = aimAt(fig, t) || [_a.x, _a.z];
+		const dx = x - controls.target.x, dz = z - controls.target.z;
+		controls.target.x += dx; controls.target.z += dz;
+		camera.position.x += dx; camera.position.z += dz;
+	}
 }
+
+const AIM_S = 1.0; // the camera aims at the hips' mean place over this long before and after the moment
+
+// The hips' path on the floor, as running sums over the clip's keyframes (its root position track).
+function hipsPath(fig) {
+	const track = fig.action.getClip().tracks.find((tr) => tr.name.endsWith('.position'));
+	if (!track || !fig.hips.parent) return null;
+	fig.group.updateMatrixWorld(true);
+	const toWorld = fig.hips.parent.matrixWorld; // still: only the bones move
+	const n = track.times.length, v = track.values;
+	const cx = new Float64Array(n + 1), cz = new Float64Array(n + 1);
+	const p = new THREE.Vector3();
+	for (let i = 0; i < n; i++) {
+		p.set(v[3 * i], v[3 * i + 1], v[3 * i + 2]).applyMatrix4(toWorld);
+		cx[i + 1] = cx[i] + p.x;
+		cz[i + 1] = cz[i] + p.z;
+	}
+	return { times: track.times, cx, cz };
+}
+
+function aimAt(fig, t) {
+	if (fig.path === undefined) fig.path = hipsPath(fig);
+	const path = fig.path;
+	if (!path || !path.times.length) return null;
+	const n = path.times.length;
+	const a = Math.min(lastAtOrBefore(path.times, t - AIM_S) + 1, n - 1);
+	const b = Math.max(Math.min(lastAtOrBefore(path.times, t + AIM_S) + 1, n), a + 1);
+	return [(path.cx[b] - path.cx[a]) / (b - a), (path.cz[b] - path.cz[a]) / (b - a)];
+}
+
+// The view presets: where the camera stands from the dancer (it follows her), or free (it stays put).
+const VIEWS = { 'three-quarter': [1.5, 0.5, 2.5], front: [0, 0.45, 2.9], side: [2.9, 0.45, 0] };
+
+function chooseView() {
+	const offset = VIEWS[$('camera-view').value];
+	if (offset) camera.position.set(controls.target.x + offset[0], controls.target.y + offset[1], controls.target.z + offset[2]);
+	controls.update();
+}
+
+// Where the dancer is on the stage (for the browser test): the box of the shown figure's bones on screen, as
+// shares of the canvas from its top left.
+window.dancesynthFrame = () => {
+	const fig = shownFigure();
+	if (!fig) return null;
+	let x0 = Infinity, y0 = Infinity, x1 = -Infinity, y1 = -Infinity;
+	fig.group.traverse((o) => {
+		if (!o.isBone) return;
+		o.getWorldPosition(_b).project(camera);
+		x0 = Math.min(x0, _b.x); x1 = Math.max(x1, _b.x); y0 = Math.min(y0, _b.y); y1 = Math.max(y1, _b.y);
+	});
+	return { left: (x0 + 1) / 2, right: (x1 + 1) / 2, top: (1 - y1) / 2, bottom: (1 - y0) / 2, height: (y1 - y0) / 2 };
+};
 
 // Index of the last value at or before t in a sorted list (binary search), -1 if none.
 function lastAtOrBefore(values, t) {
@@ -814,6 +871,7 @@ $('stop-live').addEventListener('click', () => {
 audio.addEventListener('play', () => { if (live) stopLive(); });
 $('controls').addEventListener('submit', requestDance);
 $('figure').addEventListener('change', () => { wantedFigure = $('figure').value; updateView(); });
+$('camera-view').addEventListener('change', chooseView);
 $('dl-mp4').addEventListener('click', downloadVideo);
 for (const kind of ['bvh', 'glb', 'vrma']) $(`dl-${kind}`).addEventListener('click', downloadFile);
 $('engine').addEventListener('change', fitChoices);
