@@ -117,3 +117,23 @@ def test_the_dancer_fills_the_stage_while_playing_and_right_after_seeks(studio, 
         for box in boxes:
             assert box["height"] >= 0.40, (size, box)
             assert box["left"] > 0.0 and box["right"] < 1.0 and box["top"] > 0.0 and box["bottom"] < 1.0, (size, box)
+
+
+@needs_browser
+def test_the_timeline_seeks_and_the_keys_move_by_beats_bars_and_seconds(studio, tmp_path):
+    report = run_studio(studio, tmp_path, "timeline")
+    beats, downbeats = report["marks"]["beats"], report["marks"]["downbeats"]
+    assert report["marks"]["timeline"]["beats"] == len(beats) > 100 and 0 < len(downbeats) < len(beats) / 2
+    steps = {s["action"] + f"#{i}": s for i, s in enumerate(report["steps"])}
+    s = report["steps"]
+    assert s[0]["t"] == pytest.approx(report["duration"] / 2, abs=0.02 * report["duration"])   # the middle
+    assert s[1]["t"] == pytest.approx(s[0]["t"] + 10, abs=0.05)                              # L: 10 s on
+    assert s[2]["t"] == pytest.approx(s[0]["t"], abs=0.05)                                   # J: 10 s back
+    after = [b for b in beats if b > s[2]["t"] + 1e-3]
+    assert s[3]["t"] == pytest.approx(after[0], abs=0.01) and s[4]["t"] == pytest.approx(after[1], abs=0.01)
+    assert s[5]["t"] == pytest.approx(after[0], abs=0.01)                                    # back a beat
+    bar = [b for b in downbeats if b > s[5]["t"] + 1e-3][0]
+    assert s[6]["t"] == pytest.approx(bar, abs=0.01)                                         # on to the next bar
+    assert not s[7]["paused"] and s[8]["paused"]                                             # space plays, pauses
+    assert "Paused at" in s[8]["status"] and "beat" in s[8]["status"], s[8]
+    assert steps

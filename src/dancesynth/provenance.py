@@ -54,6 +54,7 @@ class Provenance:
     summary: dict              # what the CLI prints: song, tempo, style, level, timings, warnings, ...
     run: EngineRun
     music_beat_times_s: np.ndarray = field(default_factory=_empty)
+    music_beat_in_bar: np.ndarray = field(default_factory=_empty)   # each beat's place in its bar (0: a downbeat)
     version: str = ""
     beat_sources: tuple = ()   # per music beat: the clip and frame danced on it (eval.repetition.beat_sources)
 
@@ -126,4 +127,5 @@ def make_provenance(engine: str, song: str, config, run: EngineRun, *, fps: floa
     summary.update(run.fit)
     return Provenance(engine=engine, song=song, config=jsonable(config or {}), summary=summary, run=run,
                       music_beat_times_s=np.zeros(0) if music is None else np.asarray(music.beat_times_s),
-                      version=__version__)
+                      music_beat_in_bar=np.zeros(0) if music is None or music.beat_in_bar is None
+                      else np.asarray(music.beat_in_bar), version=__version__)

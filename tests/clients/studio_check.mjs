@@ -9,6 +9,8 @@
 //         menu during live, the controls' accessible names;
 // framing: at 390x844 and 1280x800, 10 moments of Vibe Ace as it plays and 10 right after seeks: the
 //         dancer's box on the stage (window.dancesynthFrame) at each (framing-*.png: the last one);
+// timeline: click the timeline at its middle, then J/K/L, the arrows and Shift+arrows, space: the time and
+//         the status line after each;
 // layout: at 390x844 (a phone) and 1280x800, before and after a dance: the page's width against the
 //         window's, and where the stage is (layout-390x844.png, ...).
 // Prints one JSON report; every wait is bounded.
@@ -154,6 +156,25 @@ try {
 			report.sizes[`${width}x${height}`] = boxes;
 			await page.screenshot({ path: `${outDir}/framing-${width}x${height}.png` });
 		}
+	} else if (scenario === 'timeline') {
+		await danceSong('Vibe_Ace');
+		await page.evaluate(() => { const a = document.getElementById('audio'); a.pause(); a.currentTime = 0; });
+		const now = () => page.evaluate(() => ({ t: document.getElementById('audio').currentTime,
+			paused: document.getElementById('audio').paused, status: document.getElementById('status').textContent }));
+		const settle = () => page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
+		report.marks = await page.evaluate(() => ({ beats: window.dancesynth.dance.beats,
+			downbeats: window.dancesynth.dance.downbeats, timeline: window.dancesynth.timeline }));
+		const box = await page.locator('#timeline').boundingBox();
+		await page.mouse.click(box.x + box.width / 2, box.y + box.height / 2);
+		await settle();
+		report.steps = [{ action: 'click middle', ...await now() }];
+		for (const key of ['l', 'j', 'ArrowRight', 'ArrowRight', 'ArrowLeft', 'Shift+ArrowRight', ' ', ' ']) {
+			await page.keyboard.press(key);
+			await settle();
+			report.steps.push({ action: key, ...await now() });
+		}
+		report.duration = await page.evaluate(() => document.getElementById('audio').duration);
+		await page.evaluate(() => document.getElementById('audio').pause());
 	} else if (scenario === 'layout') {
 		report.sizes = {};
 		for (const [width, height] of [[390, 844], [1280, 800]]) {

@@ -504,6 +504,8 @@ def _make_dance(song_path: Path, style: str | None, seed: int | None, engine: st
     result = {"bvh": made.encoded("bvh").decode("utf-8"), "fps": moved.fps, "frames": moved.n_frames,
               "duration_s": float(s["duration_s"]), "tempo_bpm": float(s["tempo_bpm"]),
               "beats": [round(float(t), 4) for t in clip.provenance.music_beat_times_s],
+              "downbeats": [round(float(t), 4) for t, k in zip(clip.provenance.music_beat_times_s,
+                                                                clip.provenance.music_beat_in_bar) if k == 0],
               "style": s["style"], "default_tempo": bool(s["default_tempo"]), "engine": s["engine"],
               "character": target.name, "mesh": made.has_mesh, "joints": list(moved.skeleton.names),
               "sections": sections, "beats_per_bar": int(s["beats_per_bar"]) if s.get("beats_per_bar") else None,

@@ -295,8 +295,78 @@ function frame() {
 	}
 	controls.update();
 	renderer.render(scene, camera);
+	drawTimeline();
 	requestAnimationFrame(frame);
 }
+
+// ---- the timeline: sections, bars and beats under the player; click or drag to seek --------
+const timeline = $('timeline');
+const SECTION_COLOURS = ['#263041', '#2f2a3f'];
+
+function drawTimeline() {
+	const w = timeline.clientWidth, h = timeline.clientHeight, ratio = window.devicePixelRatio || 1;
+	if (timeline.width !== Math.round(w * ratio) || timeline.height !== Math.round(h * ratio)) {
+		timeline.width = Math.round(w * ratio);
+		timeline.height = Math.round(h * ratio);
+	}
+	const g = timeline.getContext('2d');
+	g.setTransform(ratio, 0, 0, ratio, 0, 0);
+	g.clearRect(0, 0, w, h);
+	const on = dance && dance.result && dance.duration > 0 && !live;
+	state.timeline = on ? { beats: dance.beats.length, bars: dance.downbeats.length, sections: dance.sections.length } : null;
+	if (!on) return;
+	const x = (t) => (t / dance.duration) * w;
+	dance.sections.forEach((s, i) => {
+		const end = i + 1 < dance.sections.length ? dance.sections[i + 1].start_s : dance.duration;
+		g.fillStyle = SECTION_COLOURS[i % 2];
+		g.fillRect(x(s.start_s), 0, x(end) - x(s.start_s), h);
+	});
+	g.fillStyle = '#59606e';
+	for (const t of dance.beats) g.fillRect(x(t), h - 7, 1, 7);
+	g.fillStyle = '#8c94a3';
+	for (const t of dance.downbeats) g.fillRect(x(t), h - 16, 1.5, 16);
+	g.fillStyle = '#4fc3f7';
+	g.fillRect(x(audio.currentTime || 0) - 1, 0, 2, h);
+	timeline.setAttribute('aria-valuemax', dance.duration.toFixed(1));
+	timeline.setAttribute('aria-valuenow', (audio.currentTime || 0).toFixed(1));
+	timeline.setAttribute('aria-valuetext', state.playback ? state.playback.text : '');
+}
+
+function seekTo(t) {
+	if (!dance || !dance.result || live) return;
+	audio.currentTime = Math.min(Math.max(t, 0), Math.max(dance.duration - 0.05, 0));
+}
+
+timeline.addEventListener('pointerdown', (ev) => {
+	const seek = (e) => seekTo((e.offsetX / timeline.clientWidth) * (dance ? dance.duration : 0));
+	seek(ev);
+	timeline.setPointerCapture(ev.pointerId);
+	timeline.onpointermove = seek;
+	timeline.onpointerup = () => { timeline.onpointermove = timeline.onpointerup = null; };
+});
+
+// Keys, as video players have them: space or K plays and pauses, J and L go 10 s back and on, the arrows
+// to the previous or next beat (with Shift, bar). Not while typing in a field or choosing in a menu.
+document.addEventListener('keydown', (ev) => {
+	if (!dance || !dance.result || live || ev.ctrlKey || ev.metaKey || ev.altKey) return;
+	if (ev.target.closest && ev.target.closest('input, select, textarea, button, summary, a')) return;
+	const t = audio.currentTime || 0;
+	const marks = ev.shiftKey ? dance.downbeats : dance.beats;
+	const key = ev.key.length === 1 ? ev.key.toLowerCase() : ev.key;
+	if (key === ' ' || key === 'k') {
+		if (audio.paused) audio.play().catch(() => {}); else audio.pause();
+	} else if (key === 'j' || key === 'l') {
+		seekTo(t + (key === 'l' ? 10 : -10));
+	} else if (key === 'ArrowRight' || key === 'ArrowLeft') {
+		const i = lastAtOrBefore(marks, t + 1e-3);
+		const next = key === 'ArrowRight' ? marks[i + 1] : marks[Math.max(t - (marks[i] ?? 0) < 0.15 ? i - 1 : i, 0)];
+		if (next === undefined) return;
+		seekTo(next);
+	} else {
+		return;
+	}
+	ev.preventDefault();
+});
 
 // ---- the status line follows the music -------------------------------------------------
 function clock(t) {
@@ -459,7 +529,8 @@ async function requestDance(event) {
 		state.timings.figures_ms = performance.now() - t0 - state.timings.dance_ms;
 		stopLive();
 		if (videoJob) cancelVideo(videoJob); // the video of the dance that leaves the stage is not wanted
-		showDance({ figures, beats: result.beats, sections: result.sections, duration: result.duration_s, result });
+		showDance({ figures, beats: result.beats, downbeats: result.downbeats || [], sections: result.sections,
+			duration: result.duration_s, result });
 		offerFigures(Boolean(figures.character));
 		offerDownloads(result);
 		audio.pause();
@@ -468,7 +539,7 @@ async function requestDance(event) {
 		state.frames = result.frames;
 		state.beats = result.beats.length;
 		state.dance = { id: result.dance_id, engine: result.engine, character: result.character, mesh: result.mesh,
-			style: result.style, joints: result.joints };
+			style: result.style, joints: result.joints, beats: result.beats, downbeats: result.downbeats };
 		$('info').textContent = `${result.style} at ${result.tempo_bpm.toFixed(1)} bpm, ${result.beats.length} beats, ` +
 			`${result.duration_s.toFixed(1)} s · ${result.engine} engine · ${result.character}` +
 			(result.mesh ? '' : ' rig') + (result.default_tempo ? ' · no clear beat: a steady default tempo' : '') +
