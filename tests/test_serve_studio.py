@@ -137,3 +137,10 @@ def test_the_timeline_seeks_and_the_keys_move_by_beats_bars_and_seconds(studio, 
     assert not s[7]["paused"] and s[8]["paused"]                                             # space plays, pauses
     assert "Paused at" in s[8]["status"] and "beat" in s[8]["status"], s[8]
     assert steps
+
+
+@needs_browser
+def test_axe_finds_no_serious_or_critical_violations(studio, tmp_path):
+    report = run_studio(studio, tmp_path, "axe")
+    assert set(report["states"]) == {"idle", "dancing", "live", "error"}
+    assert all(not found for found in report["states"].values()), report["states"]

@@ -11,9 +11,11 @@
 //         dancer's box on the stage (window.dancesynthFrame) at each (framing-*.png: the last one);
 // timeline: click the timeline at its middle, then J/K/L, the arrows and Shift+arrows, space: the time and
 //         the status line after each;
+// axe: axe-core's serious and critical violations with the page idle, dancing, live and after an error;
 // layout: at 390x844 (a phone) and 1280x800, before and after a dance: the page's width against the
 //         window's, and where the stage is (layout-390x844.png, ...).
 // Prints one JSON report; every wait is bounded.
+import AxeBuilder from '@axe-core/playwright';
 import { launchChromium } from './headless.mjs';
 
 const [url, outDir, scenario, executablePath = '/usr/bin/chromium'] = process.argv.slice(2);
@@ -21,7 +23,9 @@ const report = { ok: false, errors: [], console: [], scenario };
 let browser;
 try {
 	browser = await launchChromium(executablePath, ['--autoplay-policy=no-user-gesture-required', '--mute-audio']);
-	const page = await browser.newPage({ viewport: { width: 1280, height: 800 }, acceptDownloads: true });
+	// A context of its own: axe-core's runner needs one.
+	const context = await browser.newContext({ viewport: { width: 1280, height: 800 }, acceptDownloads: true });
+	const page = await context.newPage();
 	page.setDefaultTimeout(20000);
 	page.on('pageerror', (e) => report.errors.push(`pageerror: ${e.message}`));
 	page.on('console', (m) => { if (m.type() === 'error' && !/404|400/.test(m.text())) report.console.push(m.text()); });
@@ -175,6 +179,21 @@ try {
 		}
 		report.duration = await page.evaluate(() => document.getElementById('audio').duration);
 		await page.evaluate(() => document.getElementById('audio').pause());
+	} else if (scenario === 'axe') {
+		const audit = async () => (await new AxeBuilder({ page }).analyze()).violations
+			.filter((v) => ['serious', 'critical'].includes(v.impact))
+			.map((v) => ({ id: v.id, impact: v.impact, help: v.help, nodes: v.nodes.slice(0, 3).map((n) => n.target.join(' ')) }));
+		report.states = { idle: await audit() };
+		await danceSong('trumpet');
+		report.states.dancing = await audit();
+		await page.fill('#live-url', 'http://127.0.0.1:9/nothing.ogg');
+		await page.click('#go-live');
+		report.states.live = await audit();
+		await page.click('#stop-live');
+		await page.fill('#seed', '-5');
+		await page.click('#dance');
+		await page.waitForFunction(() => window.dancesynth.state === 'error', null, { timeout: 30000 });
+		report.states.error = await audit();
 	} else if (scenario === 'layout') {
 		report.sizes = {};
 		for (const [width, height] of [[390, 844], [1280, 800]]) {
