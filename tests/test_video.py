@@ -267,3 +267,25 @@ def test_ctrl_c_in_a_real_process_leaves_no_partial_file(dance_bvh, tmp_path):
     assert proc.returncode != 0
     assert "KeyboardInterrupt" in err
     assert_nothing_written(out)
+
+
+def test_the_camera_turns_with_the_dancer_so_she_mostly_faces_it():
+    """Vibe Ace's salsa turns about: a camera fixed on her mean facing saw her face in about half the frames;
+    turning slowly with her low-passed facing, it sees it in most, never whipping round."""
+    from dancesynth.api import dance
+    from dancesynth.export.camera import MAX_TURN_DEG_S, _facings, plan_shot
+    from dancesynth.export.figure import build_figure, clip_pose, pose_points
+
+    clip = dance(BUNDLED_MUSIC / "Kevin_MacLeod_-_Vibe_Ace.ogg", seed=0)
+    fig = build_figure(clip.skeleton)
+    frames = np.arange(clip.n_frames)
+    facing = _facings(clip, frames, pose_points(*clip_pose(clip, frames), fig))[:, [0, 2]]
+    shot = plan_shot(clip, fig, 16 / 9)
+    to_camera = shot.direction[:, [0, 2]] / np.linalg.norm(shot.direction[:, [0, 2]], axis=1, keepdims=True)
+    known = np.linalg.norm(facing, axis=1) > 0
+    faces = (np.sum(facing * to_camera, axis=1) > 0)[known].mean()
+    mean = facing[known].sum(axis=0)
+    fixed = (facing[known] @ (mean / np.linalg.norm(mean)) > 0).mean()   # the old camera, before its 3/4 turn
+    assert faces >= 0.75 and faces > fixed + 0.1, (faces, fixed)
+    yaw = np.unwrap(np.arctan2(to_camera[:, 0], to_camera[:, 1]))
+    assert np.degrees(np.abs(np.diff(yaw))).max() * clip.fps <= MAX_TURN_DEG_S + 1e-6

@@ -1,5 +1,6 @@
-"""The camera of a dance video: a pinhole camera at a fixed elevation and a 3/4 front view, keeping its
-orientation for the whole clip and following the root horizontally through a zero-phase Gaussian
+"""The camera of a dance video: a pinhole camera at a fixed elevation and a 3/4 front view of the
+dancer's facing, low-passed over a few seconds (a turn is followed round slowly, a spin not at all, so
+she faces the viewer most of the time), following the root horizontally through a zero-phase Gaussian
 low-pass (no jitter, no lag), at a fixed height so the floor does not bob.
 """
 
@@ -20,6 +21,8 @@ FOV_Y_DEG = 30.0             # vertical field of view
 ELEVATION_DEG = 12.0         # camera looks down at the dancer by this much
 AZIMUTH_DEG = 35.0           # 3/4 view: this far round from the dancer's mean facing
 FOLLOW_SIGMA_S = 0.6         # low-pass of the root path the camera follows
+FACING_SIGMA_S = 2.0         # low-pass of the facing the camera turns with ...
+MAX_TURN_DEG_S = 60.0        # ... turning at most this fast (where the low-passed facing is weak, it swings)
 
 
 @dataclass(frozen=True)
@@ -51,7 +54,7 @@ class Shot:
     target_xz: np.ndarray   # (F, 2) low-passed root path
     target_y: float
     floor_y: float
-    direction: np.ndarray   # (3,) unit, target -> camera
+    direction: np.ndarray   # (F, 3) unit, target -> camera, per frame
     distance: float
     body_height: float
 
@@ -71,11 +74,9 @@ def plan_shot(clip: MotionClip, fig: Figure, aspect: float, body=None) -> Shot:
     floor_y = float(np.percentile(lowest, 5))
     height = float(np.median(extent[..., 1].max(axis=1) - lowest))
     height = height if np.isfinite(height) and height > 1e-3 else 1.7
-    forward = _mean_facing(clip, sample, pts)
-    left = np.cross([0.0, 1.0, 0.0], forward)
-    az, el = np.radians(AZIMUTH_DEG), np.radians(ELEVATION_DEG)
-    horizontal = np.cos(az) * forward + np.sin(az) * left
-    direction = np.cos(el) * horizontal + np.array([0.0, np.sin(el), 0.0])
+    yaw = _facing_yaw(clip, sample, pts) + np.radians(AZIMUTH_DEG)   # per frame, about +y from +z
+    el = np.radians(ELEVATION_DEG)
+    direction = np.stack([np.cos(el) * np.sin(yaw), np.full(n, np.sin(el)), np.cos(el) * np.cos(yaw)], axis=1)
     # Frame about 1.6 body heights vertically (raised arms, the floor under the feet).
     half_extent = max(0.78 * height, 0.5 * height / max(aspect, 1e-3))
     distance = half_extent / np.tan(np.radians(FOV_Y_DEG) / 2) + 0.3 * height
@@ -85,8 +86,9 @@ def plan_shot(clip: MotionClip, fig: Figure, aspect: float, body=None) -> Shot:
     return Shot(target, floor_y + 0.5 * height, floor_y, direction, float(distance), height)
 
 
-def _mean_facing(clip, sample, pts) -> np.ndarray:
-    """Mean horizontal facing, from the hips (left hip minus right hip, crossed with up)."""
+def _facings(clip, sample, pts) -> np.ndarray:
+    """Horizontal unit facing at the ``sample`` frames (0 where unknown), from the hips (left hip minus
+    right hip, crossed with up), else the root's +z."""
     try:
         roles = find_roles(clip.skeleton)
         across = pts[:, roles.hips[0]] - pts[:, roles.hips[1]]
@@ -95,7 +97,22 @@ def _mean_facing(clip, sample, pts) -> np.ndarray:
         fwd = rot.apply(clip.local_rot[sample, 0], np.array([0.0, 0.0, 1.0]))
     fwd[:, 1] = 0.0
     norm = np.linalg.norm(fwd, axis=1, keepdims=True)
-    mean = (fwd / np.maximum(norm, 1e-9))[norm[:, 0] > 1e-9].sum(axis=0)
-    if not np.isfinite(mean).all() or np.linalg.norm(mean) < 1e-6:
-        return np.array([0.0, 0.0, 1.0])
-    return mean / np.linalg.norm(mean)
+    return np.where(norm > 1e-9, fwd / np.maximum(norm, 1e-9), 0.0)
+
+
+def _facing_yaw(clip, sample, pts) -> np.ndarray:
+    """The facing the camera turns with, per frame: the sampled facings low-passed over ``FACING_SIGMA_S``
+    (as vectors, so a spin cancels out), as a yaw angle about +y from +z, unwrapped and interpolated."""
+    fwd = _facings(clip, sample, pts)
+    if len(sample) > 1:
+        step_s = float(np.mean(np.diff(sample))) / clip.fps
+        fwd = gaussian_filter1d(fwd, max(FACING_SIGMA_S / step_s, 1e-3), axis=0, mode="nearest")
+    mean = fwd.sum(axis=0)
+    fallback = np.arctan2(mean[0], mean[2]) if np.linalg.norm(mean) > 1e-6 else 0.0
+    weak = np.linalg.norm(fwd, axis=1) < 1e-6   # no facing to follow here: hold the overall one
+    yaw = np.unwrap(np.where(weak, fallback, np.arctan2(fwd[:, 0], fwd[:, 2])))
+    yaw = np.interp(np.arange(clip.n_frames), sample, yaw)
+    step = np.radians(MAX_TURN_DEG_S) / clip.fps
+    for i in range(1, yaw.size):   # a slew limit: the camera never whips round
+        yaw[i] = yaw[i - 1] + np.clip(yaw[i] - yaw[i - 1], -step, step)
+    return yaw

@@ -76,10 +76,6 @@ class FrameRenderer:
         s = self.supersample = SUPERSAMPLE if self.width * self.height <= SUPERSAMPLE_MAX_PIXELS else 1
         self.size = (self.width * s, self.height * s)
         self.focal = (self.height * s / 2) / np.tan(np.radians(FOV_Y_DEG) / 2)
-        back = self.shot.direction
-        right = np.cross([0.0, 1.0, 0.0], back)
-        right /= np.linalg.norm(right)
-        self.basis = (right, np.cross(back, right), back)
         self._colours = to_ycbcr if pix_fmt == "yuv420p" else (lambda rgb: np.asarray(rgb, dtype=np.float64))
         self.shades = None
         if mesh is not None:
@@ -89,7 +85,10 @@ class FrameRenderer:
     def camera(self, frame: int) -> Camera:
         tx, tz = self.shot.target_xz[frame]
         target = np.array([tx, self.shot.target_y, tz])
-        right, up, back = self.basis
+        back = self.shot.direction[frame]
+        right = np.cross([0.0, 1.0, 0.0], back)
+        right /= np.linalg.norm(right)
+        up = np.cross(back, right)
         return Camera(target + self.shot.distance * back, right, up, back, self.focal,
                       (self.size[0] / 2, self.size[1] / 2))
 

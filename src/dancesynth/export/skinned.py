@@ -156,22 +156,25 @@ class SkinnedMesh:
         coordinates, 1/depth and light (V,) float32; NaN for a vertex nearer than ``near``.
 
         ``g_rot`` (F, J, 4), ``g_pos`` (F, J, 3): the frames' global joint rotations and positions;
-        ``cameras``: each frame's ``camera.Camera`` (all of one orientation); nothing nearer than ``near``."""
+        ``cameras``: each frame's ``camera.Camera`` (one focal length and centre; each its own place and
+        orientation); nothing nearer than ``near``."""
         pos, nrm = self.skin(g_rot, g_pos)
         cam = cameras[0]
         pos -= np.stack([c.position for c in cameras]).astype(np.float32)[:, :, None]
-        right, up, ahead = (_along(pos, axis) for axis in (cam.right, cam.up, -cam.back))  # (F, V) each
+        right, up, back = (np.stack([getattr(c, axis) for c in cameras]) for axis in ("right", "up", "back"))
+        right, up, ahead = (_along(pos, axis) for axis in (right, up, -back))  # (F, V) each
         with np.errstate(divide="ignore", invalid="ignore"):
             w = np.where(ahead > near, 1.0 / ahead, np.float32(np.nan))
         u, v = cam.centre[0] + cam.focal_px * right * w, cam.centre[1] - cam.focal_px * up * w
-        light = self._light(nrm, cam)
+        light = self._light(nrm, cameras)
         return [(u[k], v[k], w[k], light[k]) for k in range(len(cameras))]
 
-    def _light(self, nrm: np.ndarray, cam) -> np.ndarray:
-        """Light (F, V) falling on each vertex with normals ``nrm`` (F, 3, V), lights placed by ``cam``'s basis."""
+    def _light(self, nrm: np.ndarray, cameras) -> np.ndarray:
+        """Light (F, V) falling on each vertex with normals ``nrm`` (F, 3, V), lights placed by each frame's
+        camera's basis."""
         size = np.sqrt(nrm[:, 0] ** 2 + nrm[:, 1] ** 2 + nrm[:, 2] ** 2)
         nrm /= np.maximum(size, 1e-12)[:, None]
-        to_world = np.stack([cam.right, cam.up, cam.back], axis=1)
+        to_world = np.stack([np.stack([c.right, c.up, c.back], axis=1) for c in cameras])   # (F, 3, 3)
         key, fill = (to_world @ _unit(d) for d in (KEY_LIGHT, FILL_LIGHT))
         up = nrm[:, 1]
         return (SKY_AMBIENT * (0.5 + 0.5 * up) + GROUND_AMBIENT * (0.5 - 0.5 * up)
@@ -340,9 +343,10 @@ def _planes(x: np.ndarray, y: np.ndarray, *values: np.ndarray) -> list[tuple[np.
 
 
 def _along(vectors: np.ndarray, axis) -> np.ndarray:
-    """Components (F, V) of component-major vectors (F, 3, V) along ``axis`` (3,)."""
-    x, y, z = (float(a) for a in axis)
-    return x * vectors[:, 0] + y * vectors[:, 1] + z * vectors[:, 2]
+    """Components (F, V) of component-major vectors (F, 3, V) along ``axis``: one (3,), or one a frame (F, 3)."""
+    a = np.asarray(axis, dtype=np.float32)
+    a = a[:, :, None] if a.ndim == 2 else a[None, :, None]
+    return a[:, 0] * vectors[:, 0] + a[:, 1] * vectors[:, 1] + a[:, 2] * vectors[:, 2]
 
 
 def _matrices(q: np.ndarray) -> np.ndarray:
