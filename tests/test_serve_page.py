@@ -162,7 +162,7 @@ def test_the_page_dances_live_to_a_stream_in_headless_chromium(server, music_htt
     frames; the stick figure is still on the toggle; the delay keeps the motion ahead of the music."""
     from PIL import Image
 
-    report = run_viewer(server, tmp_path, "live", f"{music_http}/{TRUMPET.name}", stick=True)
+    report = run_viewer(server, tmp_path, "live", f"{music_http}/{TRUMPET.name}", stick=True, pause=True)
     shutil.copytree(tmp_path, LIVE_SHOTS, dirs_exist_ok=True)
     live = report["page"]["live"]
     assert live["character"] == "mannequin" and live["model"] == "ready", live
@@ -178,6 +178,10 @@ def test_the_page_dances_live_to_a_stream_in_headless_chromium(server, music_htt
     assert live["delay_s"] == pytest.approx(2 + 1.0)
     # Starved only as long as a busy machine made the server later than the delay allows (0 when it kept up).
     assert live["playing_s"] > 0.5 and live["starved_s"] < 0.1 + live["server_late_s"], live
+    # Pause holds the live music and dance (a second paused moves the clock by ~0), Resume goes on.
+    pause = report["pause"]
+    assert pause["label"] == "Resume" and abs(pause["held_for_1s"]) < 0.1 and pause["resumed_1s"] > 0.5, pause
+    assert pause["volume"] == pytest.approx(0.3)
 
 
 @needs_browser

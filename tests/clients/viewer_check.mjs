@@ -16,7 +16,8 @@
 // OPTIONS, JSON: {"engine": .., "character": ..} choose them before Dance (live: the character only);
 // "stick": true also switches to the stick figure and takes c.png and d.png;
 // "playback": true pauses, seeks and plays to the end, noting the status line each time;
-// "video": true presses the MP4 button and saves the download as OUT_DIR/dance.mp4.
+// "video": true presses the MP4 button and saves the download as OUT_DIR/dance.mp4;
+// "pause": true (live) pauses for a second, resumes for one and sets the volume, noting the music clock.
 // Writes OUT_DIR/a.png, OUT_DIR/b.png and OUT_DIR/page.png (the whole page) and prints one JSON
 // object on stdout (timings, the music clock and status line at each shot, page errors); every
 // wait is bounded.
@@ -129,6 +130,19 @@ try {
 		report.view_after_toggle = await page.evaluate(() => window.dancesynth.view);
 		if (mode === 'song') await playFrom(page, 0.5, 1.0); // the song may have ended meanwhile
 		await shots(['c', 'd']);
+	}
+	if (options.pause) {   // live: Pause holds the music clock and the dance; Resume goes on from there
+		await page.click('#live-pause');
+		await page.waitForTimeout(300);
+		const held = await page.evaluate(() => window.dancesynth.live.time);
+		await page.waitForTimeout(1000);
+		report.pause = { held_for_1s: await page.evaluate(() => window.dancesynth.live.time) - held,
+			label: await page.evaluate(() => document.getElementById('live-pause').textContent) };
+		await page.click('#live-pause');
+		await page.waitForTimeout(1000);
+		report.pause.resumed_1s = await page.evaluate(() => window.dancesynth.live.time) - held;
+		await page.fill('#volume', '0.3');
+		report.pause.volume = await page.evaluate(() => document.getElementById('audio').volume);
 	}
 	if (options.capture_s) {
 		await page.waitForFunction((s) => window.dancesynth.live.capture.sent_s >= s, options.capture_s,

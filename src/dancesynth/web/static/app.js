@@ -696,6 +696,7 @@ const QUIET = { echoCancellation: false, noiseSuppression: false, autoGainContro
 function stopLive() {
 	state.capturing = null; // a capture still waiting for the user's choice is not started
 	$('engine').disabled = false;
+	$('live-pause').hidden = true;
 	if (!live) return;
 	live.ws.onmessage = live.ws.onclose = null;
 	live.ws.close();
@@ -864,8 +865,10 @@ function openLive(query, ctx, capture) {
 	const ws = new WebSocket(`${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws/live?${params}`);
 	ws.binaryType = 'arraybuffer';
 	$('engine').disabled = true; // live is always the streaming engine
+	$('live-pause').hidden = false;
+	$('live-pause').textContent = 'Pause';
 	const out = ctx.createGain();
-	out.gain.value = capture && !capture.echo ? 0 : 1;
+	out.gain.value = capture && !capture.echo ? 0 : Number($('volume').value);
 	out.connect(ctx.destination);
 	live = { ws, ctx, out, capture, t0: null, last: null, sr: 22050, samples: 0, fps: 30, delay: 10,
 		start: 0, hierarchy: null, rows: [], base: null, beats: [], time: 0, character, stick: null, model: null };
@@ -943,6 +946,20 @@ audio.addEventListener('play', () => { if (live) stopLive(); });
 $('controls').addEventListener('submit', requestDance);
 $('figure').addEventListener('change', () => { wantedFigure = $('figure').value; updateView(); });
 $('camera-view').addEventListener('change', chooseView);
+// Live, pausing holds the music and the dance where they are (the stream goes on arriving; they resume
+// from there, that much further behind it); the volume is the song's and the live stream's alike.
+$('live-pause').addEventListener('click', () => {
+	if (!live) return;
+	const pausing = live.ctx.state === 'running';
+	(pausing ? live.ctx.suspend() : live.ctx.resume()).catch(() => {});
+	$('live-pause').textContent = pausing ? 'Resume' : 'Pause';
+	state.live.paused = pausing;
+});
+$('volume').addEventListener('input', () => {
+	const volume = Number($('volume').value);
+	audio.volume = volume;
+	if (live && !(live.capture && !live.capture.echo)) live.out.gain.value = volume;
+});
 $('dl-mp4').addEventListener('click', downloadVideo);
 for (const kind of ['bvh', 'glb', 'vrma']) $(`dl-${kind}`).addEventListener('click', downloadFile);
 $('engine').addEventListener('change', fitChoices);
