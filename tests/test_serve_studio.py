@@ -142,5 +142,6 @@ def test_the_timeline_seeks_and_the_keys_move_by_beats_bars_and_seconds(studio, 
 @needs_browser
 def test_axe_finds_no_serious_or_critical_violations(studio, tmp_path):
     report = run_studio(studio, tmp_path, "axe")
-    assert set(report["states"]) == {"idle", "dancing", "live", "error"}
+    assert set(report["states"]) == {"idle", "dancing", "live", "error", "light_dancing"}
+    assert report["light_background"] == "rgb(244, 245, 247)"   # the light theme when the system asks for it
     assert all(not found for found in report["states"].values()), report["states"]

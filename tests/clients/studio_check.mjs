@@ -24,7 +24,8 @@ let browser;
 try {
 	browser = await launchChromium(executablePath, ['--autoplay-policy=no-user-gesture-required', '--mute-audio']);
 	// A context of its own: axe-core's runner needs one.
-	const context = await browser.newContext({ viewport: { width: 1280, height: 800 }, acceptDownloads: true });
+	const context = await browser.newContext({ viewport: { width: 1280, height: 800 }, acceptDownloads: true,
+		colorScheme: 'dark' });
 	const page = await context.newPage();
 	page.setDefaultTimeout(20000);
 	page.on('pageerror', (e) => report.errors.push(`pageerror: ${e.message}`));
@@ -194,6 +195,12 @@ try {
 		await page.click('#dance');
 		await page.waitForFunction(() => window.dancesynth.state === 'error', null, { timeout: 30000 });
 		report.states.error = await audit();
+		await page.emulateMedia({ colorScheme: 'light' });   // the light theme, as a system set to light asks
+		await page.fill('#seed', '');
+		await danceSong('Vibe_Ace');
+		report.states.light_dancing = await audit();
+		report.light_background = await page.evaluate(() => getComputedStyle(document.body).backgroundColor);
+		await page.screenshot({ path: `${outDir}/light.png` });
 	} else if (scenario === 'layout') {
 		report.sizes = {};
 		for (const [width, height] of [[390, 844], [1280, 800]]) {

@@ -36,7 +36,9 @@ try {
 			`--use-file-for-fake-audio-capture=${options.audio_file}`];
 	browser = await launchChromium(executablePath, ['--autoplay-policy=no-user-gesture-required', '--mute-audio', ...fake]);
 	report.timings.browser_ms = since();
-	const page = await browser.newPage({ viewport: { width: 1000, height: 700 }, acceptDownloads: true });
+	// Dark, the page's default theme: the shots are checked against its colours.
+	const page = await browser.newPage({ viewport: { width: 1000, height: 700 }, acceptDownloads: true,
+		colorScheme: 'dark' });
 	page.setDefaultTimeout(20000);
 	page.on('pageerror', (e) => report.errors.push(`pageerror: ${e.message}`));
 	page.on('console', (m) => { if (m.type() === 'error') report.console.push(m.text()); });

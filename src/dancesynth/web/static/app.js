@@ -34,7 +34,7 @@ const canvas = $('view');
 const renderer = new THREE.WebGLRenderer({ canvas, antialias: true });
 renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
 const scene = new THREE.Scene();
-scene.background = new THREE.Color(0x1d2028);
+scene.background = new THREE.Color();
 const camera = new THREE.PerspectiveCamera(45, 1, 0.05, 100);
 camera.position.set(1.5, 1.4, 2.5); // VIEWS['three-quarter'] from the target: the dancer fills most of the height
 const controls = new OrbitControls(camera, canvas);
@@ -44,8 +44,22 @@ scene.add(new THREE.HemisphereLight(0xffffff, 0x404050, 2.0));
 const sun = new THREE.DirectionalLight(0xffffff, 1.5);
 sun.position.set(3, 6, 4);
 scene.add(sun);
-const grid = new THREE.GridHelper(10, 20, 0x59606e, 0x3a3f4b); // lines every 0.5 m
-scene.add(grid);
+let grid = null; // lines every 0.5 m
+
+// The page's palette (index.html's CSS variables, dark or light as the system asks) for the stage and timeline.
+const palette = {};
+function applyTheme() {
+	const css = getComputedStyle(document.documentElement);
+	for (const name of ['stage', 'grid', 'grid-minor', 'section-a', 'section-b', 'beat', 'bar', 'accent']) {
+		palette[name] = css.getPropertyValue(`--${name}`).trim();
+	}
+	scene.background.set(palette.stage);
+	if (grid) { scene.remove(grid); grid.dispose(); }
+	grid = new THREE.GridHelper(10, 20, palette.grid, palette['grid-minor']);
+	scene.add(grid);
+}
+applyTheme();
+window.matchMedia('(prefers-color-scheme: light)').addEventListener('change', applyTheme);
 
 const ring = new THREE.Mesh(
 	new THREE.RingGeometry(0.55, 0.7, 64),
@@ -301,7 +315,6 @@ function frame() {
 
 // ---- the timeline: sections, bars and beats under the player; click or drag to seek --------
 const timeline = $('timeline');
-const SECTION_COLOURS = ['#263041', '#2f2a3f'];
 
 function drawTimeline() {
 	const w = timeline.clientWidth, h = timeline.clientHeight, ratio = window.devicePixelRatio || 1;
@@ -318,14 +331,14 @@ function drawTimeline() {
 	const x = (t) => (t / dance.duration) * w;
 	dance.sections.forEach((s, i) => {
 		const end = i + 1 < dance.sections.length ? dance.sections[i + 1].start_s : dance.duration;
-		g.fillStyle = SECTION_COLOURS[i % 2];
+		g.fillStyle = palette[i % 2 ? 'section-b' : 'section-a'];
 		g.fillRect(x(s.start_s), 0, x(end) - x(s.start_s), h);
 	});
-	g.fillStyle = '#59606e';
+	g.fillStyle = palette.beat;
 	for (const t of dance.beats) g.fillRect(x(t), h - 7, 1, 7);
-	g.fillStyle = '#8c94a3';
+	g.fillStyle = palette.bar;
 	for (const t of dance.downbeats) g.fillRect(x(t), h - 16, 1.5, 16);
-	g.fillStyle = '#4fc3f7';
+	g.fillStyle = palette.accent;
 	g.fillRect(x(audio.currentTime || 0) - 1, 0, 2, h);
 	timeline.setAttribute('aria-valuemax', dance.duration.toFixed(1));
 	timeline.setAttribute('aria-valuenow', (audio.currentTime || 0).toFixed(1));
