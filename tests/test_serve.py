@@ -182,6 +182,36 @@ def wait_for_video(server, url: str, timeout_s: float = 90.0) -> tuple[dict, lis
     raise AssertionError(f"the video was not done within {timeout_s} s: {states[-5:]}")
 
 
+def test_a_users_character_file_dances_downloads_and_renders_and_is_not_kept(tmp_path):
+    """A GLB sent as ``character_file`` dances as itself (its name, its mesh), downloads as the user's model with
+    the dance, and renders to MP4; once answered, the server keeps none of its files. A .gltf reaching for a
+    file beside the server's folder is refused in the loader's words, without the server's paths."""
+    from dancesynth.web.server import create_app
+
+    app = create_app(max_upload_mb=MAX_UPLOAD_MB, video_size=VIDEO_SIZE)
+    with uvicorn_server(app) as srv:
+        _, _, glb = request(srv, "GET", "/api/characters/mannequin.glb")
+        status, result = post_dance(srv, {"song": TRUMPET.name}, {"character_file": ("My Avatar.glb", glb)})
+        assert status == 200 and result["character"] == "My_Avatar" and result["mesh"], result
+        assert not list(app.state.characters_dir.iterdir()), "the user's file outlived the request"
+        status, headers, data = request(srv, "GET", result["downloads"]["glb"])
+        gltf = glb_json(data)
+        assert status == 200 and gltf["meshes"] and gltf["animations"][0]["name"] == "dance"
+        assert 'filename="sorohanro_-_solo-trumpet-06-My_Avatar.glb"' in headers["content-disposition"]
+        video = result["video_url"] + "?figure=character"
+        request(srv, "POST", video)
+        job, _ = wait_for_video(srv, video)
+        assert job["state"] == "done", job
+        (tmp_path / "own.mp4").write_bytes(request(srv, "GET", job["url"])[2])
+        assert_video_with_song(tmp_path / "own.mp4")
+        doc = {"asset": {"version": "2.0"}, "buffers": [{"uri": "../secret.bin", "byteLength": 60}]}
+        status, answer = post_dance(srv, {"song": TRUMPET.name},
+                                    {"character_file": ("evil.gltf", json.dumps(doc).encode())})
+        assert status == 400 and "outside the model's folder" in answer["error"], answer
+        assert str(app.state.characters_dir) not in answer["error"] and "/tmp" not in answer["error"]
+        assert not list(app.state.characters_dir.iterdir())
+
+
 def test_an_mp4_is_rendered_on_the_server_with_the_song(server, tmp_path):
     result = kept_dance(server)
     video = result["video_url"] + "?figure=character"
@@ -357,6 +387,13 @@ def test_an_oversized_upload_is_refused_with_413(server):
     ({"song": TRUMPET.name, "character": "/etc/passwd"}, None, ["unknown character"]),
     ({"song": TRUMPET.name, "character": str(BUNDLED_MUSIC.parents[1] / "retarget" / "x.bvh")}, None,
      ["unknown character"]),
+    # A user's character file: the CLI's checks, in the page's words.
+    ({"song": TRUMPET.name}, {"character_file": ("me.txt", b"hello")}, ["must be .glb, .gltf, .vrm, .bvh", "me.txt"]),
+    ({"song": TRUMPET.name}, {"character_file": ("me.glb", b"glTF" + bytes(40))}, ["me.glb"]),
+    ({"song": TRUMPET.name}, {"character_file": ("me.bvh", b"HIERARCHY\nROOT")}, ["me.bvh"]),
+    ({"song": TRUMPET.name}, {"bone_map": ("bones.toml", b"[bones]\n")}, ["a bone map goes with a character file"]),
+    ({"song": TRUMPET.name, "character": "mannequin"}, {"character_file": ("me.gltf", b'{"asset": {"version": "2.0"}, '
+     b'"buffers": [{"uri": "../../../etc/passwd", "byteLength": 4}]}')}, ["me.gltf"]),
 ])
 def test_bad_requests_get_400_with_a_message_and_no_traceback(server, fields, files, words):
     status, result = post_dance(server, fields, files)

@@ -80,6 +80,37 @@ def test_a_failed_dance_does_not_pass_for_the_one_on_stage(studio, tmp_path):
 
 
 @needs_browser
+def test_a_user_dances_their_own_character_and_downloads_it(studio, tmp_path):
+    """"Your own file" in the Character menu: a GLB dances on stage as itself and downloads as GLB (the user's
+    model with the dance) and VRMA; a .gltf reaching outside its folder is refused with the loader's words,
+    the dance on stage labelled as the previous one; a VRM dropped on the page dances."""
+    import pygltflib
+
+    from fuzz.character_target import make_seeds
+
+    seeds = tmp_path / "seeds"
+    seeds.mkdir()
+    make_seeds(seeds)
+    doc = json.loads((seeds / "model.gltf").read_text())
+    doc["buffers"][0]["uri"] = "../../../etc/passwd"
+    (tmp_path / "evil.gltf").write_text(json.dumps(doc))
+    shutil.copy(seeds / "avatar1.vrm", tmp_path / "avatar.vrm")
+    report = run_studio(studio, tmp_path, "own-character")
+    assert report["hidden_before"] and not report["hidden_after"]
+    assert "Choose your character file" in report["no_file"], report["no_file"]
+    own = report["own"]
+    assert own["state"] == "ready" and own["character"] == "My_Avatar" and own["view"] == "character", own
+    assert report["saved_glb"] == "sorohanro_-_solo-trumpet-06-My_Avatar.glb", report
+    model = pygltflib.GLTF2().load(str(tmp_path / "own-glb.glb"))
+    assert model.meshes and [a.name for a in model.animations][0] == "dance"
+    assert report["saved_vrma"].endswith(".vrma") and (tmp_path / "own-vrma.vrma").read_bytes()[:4] == b"glTF"
+    evil = report["evil"]
+    assert evil["state"] == "error" and "outside the model's folder" in evil["status"], evil
+    assert "/tmp" not in evil["status"] and evil["info"].startswith("Still on stage, the previous dance: "), evil
+    assert report["dropped"]["state"] == "ready" and report["dropped"]["view"] == "character", report["dropped"]
+
+
+@needs_browser
 def test_the_page_fits_a_phone_and_a_desktop(studio, tmp_path):
     """At 390x844 nothing scrolls sideways and the stage has most of the screen (the live controls folded
     away); at 1280x800 likewise, before and after a dance."""

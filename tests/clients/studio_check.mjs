@@ -12,6 +12,9 @@
 // timeline: click the timeline at its middle, then J/K/L, the arrows and Shift+arrows, space: the time and
 //         the status line after each;
 // axe: axe-core's serious and critical violations with the page idle, dancing, live and after an error;
+// own-character: choose "your own file" and a GLB (the mannequin's, as "My Avatar.glb"), dance, download
+//         its GLB and VRMA (own-*.glb, own-*.vrma); then OUT_DIR/evil.gltf (a model reaching outside its
+//         folder): the message; then OUT_DIR/avatar.vrm dropped on the page: what dances;
 // layout: at 390x844 (a phone) and 1280x800, before and after a dance: the page's width against the
 //         window's, and where the stage is (layout-390x844.png, ...).
 // Prints one JSON report; every wait is bounded.
@@ -201,6 +204,43 @@ try {
 		report.states.light_dancing = await audit();
 		report.light_background = await page.evaluate(() => getComputedStyle(document.body).backgroundColor);
 		await page.screenshot({ path: `${outDir}/light.png` });
+	} else if (scenario === 'own-character') {
+		const { readFile } = await import('node:fs/promises');
+		const whenDanced = async (before) => {
+			await page.waitForFunction((b) => window.dancesynth.state === 'error' || (window.dancesynth.state === 'ready' &&
+				window.dancesynth.dance && window.dancesynth.dance.id !== b), before, { timeout: 90000 });
+			return page.evaluate(() => ({ state: window.dancesynth.state, id: window.dancesynth.dance && window.dancesynth.dance.id,
+				character: window.dancesynth.dance && window.dancesynth.dance.character, view: window.dancesynth.view,
+				status: document.getElementById('status').textContent, info: document.getElementById('info').textContent }));
+		};
+		await page.selectOption('#song', await songValue('trumpet'));
+		report.hidden_before = await page.isHidden('#own-character');
+		await page.selectOption('#character', ':own');
+		report.hidden_after = await page.isHidden('#own-character');
+		await page.click('#dance');   // no file chosen yet: a message, nothing sent
+		report.no_file = await statusText();
+		const glb = await (await page.request.get(new URL('api/characters/mannequin.glb', url).href)).body();
+		await page.setInputFiles('#character-file', { name: 'My Avatar.glb', mimeType: 'model/gltf-binary', buffer: glb });
+		await page.click('#dance');
+		report.own = await whenDanced(null);
+		for (const kind of ['glb', 'vrma']) {
+			const download = page.waitForEvent('download', { timeout: 60000 });
+			await page.click(`#dl-${kind}`);
+			const file = await download;
+			report[`saved_${kind}`] = file.suggestedFilename();
+			await file.saveAs(`${outDir}/own-${kind}.${kind}`);
+		}
+		await page.screenshot({ path: `${outDir}/own-character.png` });
+		await page.setInputFiles('#character-file', { name: 'evil.gltf', mimeType: 'model/gltf+json',
+			buffer: await readFile(`${outDir}/evil.gltf`) });
+		await page.click('#dance');
+		report.evil = await whenDanced(report.own.id);
+		await page.evaluate(async (bytes) => {   // a VRM avatar dropped on the page
+			const dt = new DataTransfer();
+			dt.items.add(new File([new Uint8Array(bytes)], 'avatar.vrm'));
+			document.dispatchEvent(new DragEvent('drop', { dataTransfer: dt, bubbles: true, cancelable: true }));
+		}, [...await readFile(`${outDir}/avatar.vrm`)]);
+		report.dropped = await whenDanced(report.own.id);
 	} else if (scenario === 'layout') {
 		report.sizes = {};
 		for (const [width, height] of [[390, 844], [1280, 800]]) {

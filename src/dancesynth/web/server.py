@@ -25,7 +25,9 @@ import asyncio
 import contextlib
 import functools
 import math
+import re
 import shutil
+import tempfile
 import time
 from pathlib import Path
 
@@ -162,6 +164,7 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
         database = open_database(database)  # a bad folder is an error now, not at the first dance
     max_bytes = int(max_upload_mb * 1024 * 1024)
     store = UploadStore(max_files=max_stored_uploads)
+    characters_dir = tempfile.mkdtemp(prefix="dancesynth-characters-")   # users' character files, while loaded
     songs = {s["name"]: s for s in bundled_songs()}
     dances = DanceQueue(max_concurrent_dances, max_waiting_dances)
     hub = LiveHub(database, max_streams=max_live_streams, max_lag_s=max_viewer_lag_s, realtime=live_realtime,
@@ -239,13 +242,14 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
         if length is not None and length.isdigit() and int(length) > max_bytes:
             return _error(413, f"the upload is {int(length) / 2**20:.1f} MB; the limit is {max_upload_mb:g} MB")
         try:
-            form = await _limited(request, max_bytes).form(max_files=1, max_fields=10)
+            form = await _limited(request, max_bytes).form(max_files=3, max_fields=12)
         except _TooLarge:
             return _error(413, f"the upload is larger than the limit of {max_upload_mb:g} MB")
         except Exception as exc:  # malformed multipart
             return _error(400, f"could not read the form: {exc}; send multipart/form-data with "
                                "'audio' (a file) or 'song' (a bundled song name)")
         upload_key, song_path, shown = None, None, ""
+        folder, bone_map, shown_character = None, None, ("", "")
         try:
             problem = _form_problem(form)
             if problem:
@@ -263,9 +267,25 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
                 return _error(400, f"the {engine} engine has learned only {' and '.join(genres)} here; pick a "
                                    f"{' or '.join(genres)} style (or the best match for the tempo), or another engine")
             character = _text(form, "character") or DEFAULT_CHARACTER
-            if character not in LAYOUTS:  # built-ins only: a path would load a file from the server's disk
+            own, bone_map = _upload(form, "character_file"), _upload(form, "bone_map")
+            if own is not None:
+                suffix = Path(own.filename or "").suffix.lower()
+                if suffix not in CHARACTER_SUFFIXES:
+                    return _error(400, f"a character file must be {', '.join(CHARACTER_SUFFIXES)}; "
+                                       f"got {Path(own.filename or 'a file without a name').name[:60]!r}")
+                # A folder of its own: a .gltf may read only files beside it, and nothing else is there.
+                folder = Path(tempfile.mkdtemp(prefix="character-", dir=characters_dir))
+                stem = re.sub(r"[^A-Za-z0-9._-]+", "_", Path(own.filename).stem).strip("._")[:60] or "character"
+                character = folder / (stem + suffix)
+                await run_in_threadpool(_save_upload, own, character)
+                if bone_map is not None:
+                    await run_in_threadpool(_save_upload, bone_map, folder / "bone_map.toml")
+                shown_character = (str(folder) + "/", "")
+            elif bone_map is not None:
+                return _error(400, "a bone map goes with a character file (character_file)")
+            elif character not in LAYOUTS:  # built-ins only: a path would load a file from the server's disk
                 return _error(400, f"unknown character {character[:40]!r}; pick one of {', '.join(LAYOUTS)} "
-                                   "(/api/characters)")
+                                   "(/api/characters), or send your own as character_file")
             audio, song_name = _upload(form), _text(form, "song")
             if audio is None and not song_name:
                 return _error(400, "send an audio file ('audio') or the name of a bundled song ('song')")
@@ -283,12 +303,14 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
                 audio_url = f"/api/uploads/{upload_key}"
             else:
                 song_path, audio_url, shown = MUSIC_DIR / song_name, songs[song_name]["url"], song_name
-            result, made = await dances.run(_make_dance, song_path, style, seed, engine, character, database)
+            result, made = await dances.run(_make_dance, song_path, style, seed, engine, character, database,
+                                            folder / "bone_map.toml" if bone_map is not None else None)
         except DanceSynthError as exc:
             if upload_key:
                 store.discard(upload_key)
-            # Name the song as the user knows it, not by where the server keeps it.
+            # Name the song and the character as the user knows them, not by where the server keeps them.
             message = str(exc).replace(str(song_path), shown) if song_path else str(exc)
+            message = message.replace(*shown_character)
             return _error(400 if isinstance(exc, InputError) else 500, _for_the_page(message))
         except BaseException:
             if upload_key:  # an internal error or a dropped request: the song will never be danced
@@ -296,6 +318,8 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
             raise
         finally:
             await form.close()
+            if folder is not None:   # the character is loaded (or refused): its files are not needed
+                shutil.rmtree(folder, ignore_errors=True)
         if upload_key:
             store.done(upload_key)
         made.title, made.upload_key = shown, upload_key
@@ -402,15 +426,19 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
             hub.close()
             kept.close()
             store.close()
+            shutil.rmtree(characters_dir, ignore_errors=True)
 
     app = Starlette(routes=routes, middleware=[Middleware(GZipMiddleware, minimum_size=1024)],
                     exception_handlers={Exception: on_error, HTTPException: on_http_error}, lifespan=lifespan)
     app.state.uploads = store
     app.state.dances = kept
+    app.state.characters_dir = Path(characters_dir)
     return app
 
 
-_FIELDS = {"audio": "a file", "song": "text", "style": "text", "seed": "text", "engine": "text", "character": "text"}
+_FIELDS = {"audio": "a file", "song": "text", "style": "text", "seed": "text", "engine": "text", "character": "text",
+           "character_file": "a file", "bone_map": "a file"}
+CHARACTER_SUFFIXES = (".glb", ".gltf", ".vrm", ".bvh")
 
 
 # The library's advice names command-line options; a page user gets what they can do in the page.
@@ -418,6 +446,9 @@ _PAGE_WORDING = (
     ("raise the limit (--max-minutes, or max_duration_s=) or cut the song", "cut the song (the limit is the server's)"),
     ("(e.g. `ffmpeg -i IN out.wav`)", "(an audio converter or editor can)"),
     ("down-mix the file first (`ffmpeg -i IN -ac 2 out.wav`)", "mix it down to stereo first (an audio editor can)"),
+    ("file given with --bone-map", "file chosen as the bone map"),
+    ("keep the files a .gltf names next to it", "the page takes one file: export the model as .glb (glTF "
+                                                "binary), which holds them all"),
 )
 
 
@@ -442,10 +473,11 @@ def _form_problem(form) -> str:
     return ""
 
 
-def _upload(form) -> UploadFile | None:
-    """The uploaded song, if one was chosen (a form's empty file field sends no name and no bytes)."""
-    audio = form.get("audio")
-    return audio if isinstance(audio, UploadFile) and (audio.filename or audio.size) else None
+def _upload(form, key: str = "audio") -> UploadFile | None:
+    """The uploaded file of ``key`` (the song by default), if one was chosen (a form's empty file field sends
+    no name and no bytes)."""
+    upload = form.get(key)
+    return upload if isinstance(upload, UploadFile) and (upload.filename or upload.size) else None
 
 
 def _text(form, key: str) -> str:
@@ -487,18 +519,23 @@ def _rest_glb(name: str) -> bytes:
     return encode_dance(".glb", rest, target)
 
 
-def _make_dance(song_path: Path, style: str | None, seed: int | None, engine: str, character: str,
-                database) -> tuple[dict, StoredDance]:
-    """Dance, move the dance onto ``character``, and describe it for the page. Runs in a worker thread."""
+def _make_dance(song_path: Path, style: str | None, seed: int | None, engine: str, character: str | Path,
+                database, bone_map: Path | None = None) -> tuple[dict, StoredDance]:
+    """Dance, move the dance onto ``character`` (a built-in's name, or a user's file with its ``bone_map``),
+    and describe it for the page. Runs in a worker thread."""
     from ..api import dance
+    from ..retarget.character import load_character
     from ..retarget.solve import retarget
 
+    # The user's file first: one that cannot be a character is refused before the dance is made.
+    target = load_character(character, bone_map=bone_map) if isinstance(character, Path) else _character(character)
     clip = dance(song_path, style=style, seed=seed, engine=engine, database=database)
-    target = _character(character)
     moved = retarget(clip, target)
     made = StoredDance(moved, target, song_path, title=song_path.name)
-    if made.has_mesh:
-        made.encoded("glb")  # the page asks for it next: make it here, in the dance's turn
+    if made.has_mesh or target.source is not None:
+        # The page asks for it next: make it here, in the dance's turn; a user's model is made while its
+        # file is still there (it is removed once the request is answered).
+        made.encoded("glb")
     s = clip.provenance.summary
     sections = [{"start_s": round(float(x["start_s"]), 4), "level": x["level"]} for x in s.get("sections", [])]
     result = {"bvh": made.encoded("bvh").decode("utf-8"), "fps": moved.fps, "frames": moved.n_frames,

@@ -504,6 +504,7 @@ async function loadChoices() {
 			$(menu).add(option);
 		}
 	}
+	$('character').add(new Option('your own file (.glb, .gltf, .vrm, .bvh)…', OWN));
 	$('character').value = $('live-character').value = characters.default;
 	characterInfo = Object.fromEntries(characters.characters.map((c) => [c.name, c]));
 	if (songs.songs.length) $('song').value = songs.songs[0].name;
@@ -511,6 +512,13 @@ async function loadChoices() {
 }
 
 const PREVIOUS = 'Still on stage, the previous dance: ';
+const OWN = ':own'; // the Character menu's "your own file" (no built-in is named so)
+
+// "Your own file" shows where to choose it (and its bone map, for a rig whose bones have unusual names).
+function showOwnCharacter() {
+	$('own-character').hidden = $('character').value !== OWN;
+	if ($('character').value === OWN && !$('character-file').files.length) $('character-file').focus();
+}
 
 async function requestDance(event) {
 	event.preventDefault();
@@ -521,12 +529,20 @@ async function requestDance(event) {
 	else if ($('song').value) form.append('song', $('song').value);
 	else if (file) form.append('audio', file);
 	else { setStatus('Pick a song or choose an audio file.', true); return; }
-	if (form.has('audio') && file.size > state.limits.max_upload_mb * 2 ** 20) {
-		setStatus(`${file.name} is ${(file.size / 2 ** 20).toFixed(1)} MB; this server takes files up to ` +
-			`${state.limits.max_upload_mb} MB: cut or compress it first.`, true);
+	for (const field of ['style', 'seed', 'engine']) form.append(field, $(field).value);
+	if ($('character').value !== OWN) form.append('character', $('character').value);
+	else if ($('character-file').files.length) {
+		form.append('character_file', $('character-file').files[0]);
+		if ($('bone-map').files.length) form.append('bone_map', $('bone-map').files[0]);
+	} else { setStatus('Choose your character file (.glb, .gltf, .vrm or .bvh), or pick a built-in character.', true); return; }
+	const sent = [...form.values()].filter((v) => v instanceof File);
+	const bytes = sent.reduce((sum, f) => sum + f.size, 0);
+	if (bytes > state.limits.max_upload_mb * 2 ** 20) {
+		setStatus(`${sent.map((f) => f.name).join(' and ')} ${sent.length > 1 ? 'are' : 'is'} ` +
+			`${(bytes / 2 ** 20).toFixed(1)} MB; this server takes files up to ${state.limits.max_upload_mb} MB (together): ` +
+			'cut or compress it first.', true);
 		return;
 	}
-	for (const field of ['style', 'seed', 'engine', 'character']) form.append(field, $(field).value);
 	$('dance').disabled = true;
 	state.state = 'dancing';
 	setStatus('Listening to the music and choreographing…');
@@ -978,7 +994,8 @@ for (const kind of ['bvh', 'glb', 'vrma']) $(`dl-${kind}`).addEventListener('cli
 $('engine').addEventListener('change', fitChoices);
 $('style').addEventListener('change', fitChoices);
 $('file').addEventListener('change', () => { if ($('file').files.length) $('song').value = ''; });
-// A song dropped anywhere on the page is danced at once, as if chosen and Dance pressed.
+$('character').addEventListener('change', showOwnCharacter);
+// A song (or a character file) dropped anywhere on the page is danced at once, as if chosen and Dance pressed.
 document.addEventListener('dragover', (ev) => {
 	if (![...ev.dataTransfer.types].includes('Files')) return;
 	ev.preventDefault();
@@ -989,8 +1006,15 @@ document.addEventListener('drop', (ev) => {
 	document.body.classList.remove('dropping');
 	if (!ev.dataTransfer.files.length) return;
 	ev.preventDefault();
-	$('file').files = ev.dataTransfer.files;
-	$('song').value = '';
+	const file = ev.dataTransfer.files[0];
+	if (/\.(glb|gltf|vrm|bvh)$/i.test(file.name)) { // a character: the chosen song danced on it
+		$('character-file').files = ev.dataTransfer.files;
+		$('character').value = OWN;
+		showOwnCharacter();
+	} else {
+		$('file').files = ev.dataTransfer.files;
+		$('song').value = '';
+	}
 	$('controls').requestSubmit();
 });
 
