@@ -212,6 +212,38 @@ def test_a_users_character_file_dances_downloads_and_renders_and_is_not_kept(tmp
         assert not list(app.state.characters_dir.iterdir())
 
 
+def redance(server, url, fields):
+    body, headers = multipart(fields)
+    status, _, data = request(server, "POST", url, body, headers)
+    return status, json.loads(data)
+
+
+def test_a_span_re_danced_is_a_new_dance_on_the_same_character_and_song(server):
+    """``POST /api/dances/{id}/redance``: a new dance (its own id and files), the same song, length, beats and
+    character, its edit listed; the old dance is still there (the page's undo); bad spans and fields get
+    400 with what to send, a dance the server let go of 404."""
+    result = kept_dance(server, "cmu", song="Kevin_MacLeod_-_Vibe_Ace.ogg")
+    status, edited = redance(server, result["redance_url"], {"start_s": "20", "end_s": "27.5", "seed": "4"})
+    assert status == 200, edited
+    assert edited["dance_id"] != result["dance_id"] and edited["audio_url"] == result["audio_url"]
+    assert (edited["frames"], edited["beats"], edited["character"]) == (result["frames"], result["beats"], "cmu")
+    assert edited["edits"] == [{"start_s": pytest.approx(20, abs=0.3), "end_s": pytest.approx(27.5, abs=0.3),
+                                "seed": 4, "style": result["style"], "engine": "streaming", "motif": None}]
+    assert edited["bvh"] != result["bvh"] and edited["bvh"].split("MOTION")[0] == result["bvh"].split("MOTION")[0]
+    assert request(server, "GET", result["downloads"]["bvh"])[0] == 200, "the old dance is kept for undo"
+    for fields, words in [({"start_s": "20", "end_s": "20.1"}, "fewer than two beats"),
+                          ({"start_s": "abc", "end_s": "3"}, "numbers of seconds"),
+                          ({"start_s": "20", "end_s": "27", "seed": "-3"}, "seed"),
+                          ({"start_s": "20", "end_s": "27", "motif": "../../x"}, "motif's name"),
+                          ({"start_s": "20", "end_s": "27", "motif": "M9999"}, "M0 .. M"),
+                          ({"start_s": "20", "end_s": "27", "style": "polka"}, "unknown style"),
+                          ({"start_s": "20", "end_s": "27", "speed": "2"}, "unknown field 'speed'")]:
+        status, answer = redance(server, result["redance_url"], fields)
+        assert status == 400 and words in answer["error"], (fields, answer)
+    status, answer = redance(server, "/api/dances/" + "0" * 32 + "/redance", {"start_s": "1", "end_s": "3"})
+    assert status == 404 and "dance it again" in answer["error"]
+
+
 def test_an_mp4_is_rendered_on_the_server_with_the_song(server, tmp_path):
     result = kept_dance(server)
     video = result["video_url"] + "?figure=character"

@@ -111,6 +111,36 @@ def test_a_user_dances_their_own_character_and_downloads_it(studio, tmp_path):
 
 
 @needs_browser
+def test_a_span_is_re_danced_in_the_page_and_undone(studio, tmp_path):
+    """Shift+drag on the timeline selects a span on beats; "4 bars from here" selects the bars from the one
+    playing; Re-dance span gives a new dance whose frames differ from the old one's only within the span
+    (the music plays on); Undo brings the old one back; a motif that does not exist is refused in words."""
+    report = run_studio(studio, tmp_path, "edit")
+    assert report["panel_folded"], "the edit panel waits folded until a span is chosen"
+    assert report["dragged"]["open"], "choosing a span opens the edit panel"
+    dragged = report["dragged"]["span"]
+    assert dragged and 16 < dragged["start"] < 21 and 22 < dragged["end"] < 27, report["dragged"]
+    assert report["dragged"]["time"] == 0, "a Shift+drag selects, it does not seek"
+    span = report["selected"]
+    assert 18 < span["start"] <= 20.01 and 6.5 < span["end"] - span["start"] < 8.0, span   # 4 bars at 130 bpm
+    after = report["after"]
+    assert after["state"] == "ready" and len(after["edits"]) == 1 and after["undo"], after
+    assert after["edits"][0]["seed"] == 5 and abs(after["edits"][0]["start_s"] - span["start"]) < 0.01
+    assert "/api/songs/" in after["src"] and after["time"] < span["start"], after
+    assert report["info_after"].endswith("1 span re-danced"), report["info_after"]
+    changed = report["changed"]
+    assert changed["same_length"] and changed["count"] > 0, changed
+    assert span["start"] - 0.05 <= changed["first"] / 30 and changed["last"] / 30 <= span["end"] + 0.05, (changed, span)
+    undone = report["undone"]
+    assert undone["id"] != after["id"] and not undone["undo"] and report["info_undone"] == report["info_before"]
+    assert "Could not re-dance the span" in report["bad_motif"]["status"], report["bad_motif"]
+    assert "M9999" in report["bad_motif"]["status"] and report["bad_motif"]["id"] == undone["id"]
+    opened, closed = report["bracket_open"], report["bracket_close"]
+    assert opened["start"] == pytest.approx(30, abs=0.3) and 31 < opened["end"] < 32.5, opened   # a bar on
+    assert closed["start"] == opened["start"] and closed["end"] == pytest.approx(40, abs=0.3), closed
+
+
+@needs_browser
 def test_the_page_fits_a_phone_and_a_desktop(studio, tmp_path):
     """At 390x844 nothing scrolls sideways and the stage has most of the screen (the live controls folded
     away); at 1280x800 likewise, before and after a dance."""
@@ -173,6 +203,6 @@ def test_the_timeline_seeks_and_the_keys_move_by_beats_bars_and_seconds(studio, 
 @needs_browser
 def test_axe_finds_no_serious_or_critical_violations(studio, tmp_path):
     report = run_studio(studio, tmp_path, "axe")
-    assert set(report["states"]) == {"idle", "dancing", "live", "error", "light_dancing"}
+    assert set(report["states"]) == {"idle", "dancing", "editing", "live", "error", "light_dancing"}
     assert report["light_background"] == "rgb(244, 245, 247)"   # the light theme when the system asks for it
     assert all(not found for found in report["states"].values()), report["states"]

@@ -15,6 +15,9 @@
 // own-character: choose "your own file" and a GLB (the mannequin's, as "My Avatar.glb"), dance, download
 //         its GLB and VRMA (own-*.glb, own-*.vrma); then OUT_DIR/evil.gltf (a model reaching outside its
 //         folder): the message; then OUT_DIR/avatar.vrm dropped on the page: what dances;
+// edit: dance Vibe Ace, Shift+drag a span on the timeline, then "4 bars from here" at 20 s and re-dance it
+//         with seed 5: the new dance, where its frames differ from the old one's, Undo; a motif that does
+//         not exist: the message; the [ and ] keys;
 // layout: at 390x844 (a phone) and 1280x800, before and after a dance: the page's width against the
 //         window's, and where the stage is (layout-390x844.png, ...).
 // Prints one JSON report; every wait is bounded.
@@ -190,6 +193,9 @@ try {
 		report.states = { idle: await audit() };
 		await danceSong('trumpet');
 		report.states.dancing = await audit();
+		await page.click('#edit-panel summary');
+		await page.click('#select-bars');
+		report.states.editing = await audit();
 		await page.fill('#live-url', 'http://127.0.0.1:9/nothing.ogg');
 		await page.click('#go-live');
 		report.states.live = await audit();
@@ -241,6 +247,63 @@ try {
 			document.dispatchEvent(new DragEvent('drop', { dataTransfer: dt, bubbles: true, cancelable: true }));
 		}, [...await readFile(`${outDir}/avatar.vrm`)]);
 		report.dropped = await whenDanced(report.own.id);
+	} else if (scenario === 'edit') {
+		const before = await danceSong('Vibe_Ace');
+		const info = () => page.evaluate(() => document.getElementById('info').textContent);
+		report.info_before = await info();
+		await page.evaluate(() => { const a = document.getElementById('audio'); a.pause(); a.currentTime = 0; });
+		report.panel_folded = !(await page.isVisible('#edit-controls')) && await page.isVisible('#edit-panel summary');
+		const box = await page.locator('#timeline').boundingBox();
+		await page.keyboard.down('Shift');
+		await page.mouse.move(box.x + box.width * 0.3, box.y + box.height / 2);
+		await page.mouse.down();
+		await page.mouse.move(box.x + box.width * 0.4, box.y + box.height / 2, { steps: 4 });
+		await page.mouse.up();
+		await page.keyboard.up('Shift');
+		report.dragged = await page.evaluate(() => ({ ...window.dancesynth.edit, open: document.getElementById('edit-panel').open,
+			time: document.getElementById('audio').currentTime, text: document.getElementById('span').textContent }));
+		await page.evaluate(() => { document.getElementById('audio').currentTime = 20; });
+		await page.waitForFunction(() => Math.abs(document.getElementById('audio').currentTime - 20) < 0.5);
+		await page.click('#select-bars');
+		report.selected = await page.evaluate(() => window.dancesynth.edit.span);
+		await page.fill('#edit-seed', '5');
+		await page.click('#redance');
+		await page.waitForFunction((b) => ['ready', 'error'].includes(window.dancesynth.state) &&
+			window.dancesynth.dance.id !== b, before.id, { timeout: 60000 });
+		report.after = await page.evaluate(() => ({ state: window.dancesynth.state, id: window.dancesynth.dance.id,
+			edits: window.dancesynth.dance.edits, ms: window.dancesynth.timings.redance_ms,
+			time: document.getElementById('audio').currentTime, src: document.getElementById('audio').src,
+			undo: !document.getElementById('undo').disabled, status: document.getElementById('status').textContent }));
+		report.info_after = await info();
+		report.changed = await page.evaluate(async ([a, b]) => {   // where the two dances' BVH frames differ
+			const rows = async (id) => (await (await fetch(`/api/dances/${id}/dance.bvh`)).text()).split('MOTION')[1]
+				.trim().split('\n').slice(3).map((l) => l.trim().split(/\s+/).map(Number));
+			const [x, y] = [await rows(a), await rows(b)];
+			const differs = x.map((r, i) => r.some((v, j) => { const d = Math.abs(v - y[i][j]) % 360; return Math.min(d, 360 - d) > 1e-3; }));
+			return { frames: x.length, same_length: x.length === y.length, first: differs.indexOf(true),
+				last: differs.lastIndexOf(true), count: differs.filter(Boolean).length };
+		}, [before.id, report.after.id]);
+		await page.screenshot({ path: `${outDir}/edit.png` });
+		await page.click('#undo');
+		report.undone = await page.evaluate(() => ({ id: window.dancesynth.dance.id, state: window.dancesynth.state,
+			undo: !document.getElementById('undo').disabled }));
+		report.info_undone = await info();
+		await page.fill('#edit-seed', '');
+		await page.fill('#edit-motif', 'M9999');
+		await page.click('#redance');
+		await page.waitForFunction(() => window.dancesynth.state === 'error', null, { timeout: 30000 });
+		report.bad_motif = { status: await statusText(), id: await page.evaluate(() => window.dancesynth.dance.id) };
+		const at = async (t) => {
+			await page.evaluate((s) => { const a = document.getElementById('audio'); a.pause(); a.currentTime = s; }, t);
+			await page.waitForFunction((s) => Math.abs(document.getElementById('audio').currentTime - s) < 0.05, t);
+		};
+		await page.focus('#timeline');
+		await at(30);
+		await page.keyboard.press('[');
+		report.bracket_open = await page.evaluate(() => window.dancesynth.edit.span);
+		await at(40);
+		await page.keyboard.press(']');
+		report.bracket_close = await page.evaluate(() => window.dancesynth.edit.span);
 	} else if (scenario === 'layout') {
 		report.sizes = {};
 		for (const [width, height] of [[390, 844], [1280, 800]]) {

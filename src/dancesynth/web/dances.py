@@ -68,6 +68,10 @@ class StoredDance:
     song_path: Path
     title: str                 # the song as the user knows it (an upload's file name), for file names
     upload_key: str | None = None
+    music: object = None       # the song's MusicFeatures, for re-dancing a span
+    provenance: object = None  # the dance's Provenance (the clip is a retargeted copy)
+    source: tuple = ((), None)  # the skeleton it was danced on (joint names) and its floor, for the same retarget
+    audio_url: str = ""
     files: dict[str, bytes] = field(default_factory=dict)
     renders: dict[str, Render] = field(default_factory=dict)
     forgotten: bool = False

@@ -322,12 +322,55 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
                 shutil.rmtree(folder, ignore_errors=True)
         if upload_key:
             store.done(upload_key)
-        made.title, made.upload_key = shown, upload_key
+        made.title, made.upload_key, made.audio_url = shown, upload_key, audio_url
+        return answer(made, result)
+
+    def answer(made: StoredDance, result: dict) -> Response:
+        """Keep ``made`` and answer with ``result`` and where its files are."""
         key = kept.add(made)
         base = f"/api/dances/{key}"
-        result.update(audio_url=audio_url, dance_id=key, glb_url=f"{base}/dance.glb" if made.has_mesh else None,
-                      downloads={kind: f"{base}/dance.{kind}" for kind in DOWNLOADS}, video_url=f"{base}/video")
+        result.update(audio_url=made.audio_url, dance_id=key, downloads={k: f"{base}/dance.{k}" for k in DOWNLOADS},
+                      glb_url=f"{base}/dance.glb" if made.has_mesh else None, video_url=f"{base}/video",
+                      redance_url=f"{base}/redance")
         return JSONResponse(result)
+
+    async def api_redance(request: Request) -> Response:
+        """Re-dance a span of a kept dance (``start_s``, ``end_s``; ``seed``, ``style`` or ``motif``), keeping
+        the rest (``dancesynth.edit``): a new dance, the old one kept for undo."""
+        dance = kept_dance(request)
+        if isinstance(dance, Response):
+            return dance
+        try:
+            form = await _limited(request, 64 * 1024).form(max_files=0, max_fields=8)
+        except Exception:  # too large or malformed
+            return _error(400, "send the span as a small form: start_s, end_s and seed, style or motif")
+        try:
+            fields = {k: _text(form, k) for k in form.keys()}
+            unknown = set(fields) - set(_EDIT_FIELDS)
+            if unknown:
+                return _error(400, f"unknown field {sorted(unknown)[0][:40]!r}; the form takes {', '.join(_EDIT_FIELDS)}")
+            try:
+                start_s, end_s = float(fields.get("start_s", "")), float(fields.get("end_s", ""))
+            except ValueError:
+                return _error(400, "start_s and end_s must be numbers of seconds (the span to dance again)")
+            seed = parse_seed(fields.get("seed"))
+            if seed is False:
+                return _error(400, f"seed {fields['seed']!r} must be a whole number from 0 to {MAX_SEED} or empty")
+            style, motif = fields.get("style") or None, fields.get("motif") or None
+            if motif is not None and not re.fullmatch(r"M\d{1,4}", motif):
+                return _error(400, f"motif {motif[:20]!r} must be a motif's name, e.g. M17")
+            genres = engine_genres.get(dance.provenance.engine)
+            if style and not motif and genres is not None and await style_genre(style) not in genres:
+                return _error(400, f"the {dance.provenance.engine} engine has learned only {' and '.join(genres)} "
+                                   "here; pick one of its styles, or a motif (danced by the choreography engine)")
+            if dances.full():
+                return busy(f"{dances.queued} dances")
+            result, made = await dances.run(_redance, dance, start_s, end_s, seed, style, motif, database)
+        except DanceSynthError as exc:
+            return _error(400 if isinstance(exc, InputError) else 500, _for_the_page(str(exc)))
+        finally:
+            await form.close()
+        return answer(made, result)
 
     def kept_dance(request: Request) -> StoredDance | Response:
         dance = kept.get(request.path_params["key"])
@@ -414,6 +457,7 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
         Route("/api/characters/{name}.glb", api_character_glb),
         Route("/api/dances/{key}/dance.{kind}", api_dance_file),
         Route("/api/dances/{key}/video", api_video, methods=["GET", "POST", "DELETE"]),
+        Route("/api/dances/{key}/redance", api_redance, methods=["POST"]),
         Route("/api/live", api_live),
         WebSocketRoute("/ws/live", ws_live),
         Mount("/static", app=StaticFiles(directory=STATIC_DIR), name="static"),
@@ -439,6 +483,7 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
 _FIELDS = {"audio": "a file", "song": "text", "style": "text", "seed": "text", "engine": "text", "character": "text",
            "character_file": "a file", "bone_map": "a file"}
 CHARACTER_SUFFIXES = (".glb", ".gltf", ".vrm", ".bvh")
+_EDIT_FIELDS = ("start_s", "end_s", "seed", "style", "motif")
 
 
 # The library's advice names command-line options; a page user gets what they can do in the page.
@@ -523,32 +568,61 @@ def _make_dance(song_path: Path, style: str | None, seed: int | None, engine: st
                 database, bone_map: Path | None = None) -> tuple[dict, StoredDance]:
     """Dance, move the dance onto ``character`` (a built-in's name, or a user's file with its ``bone_map``),
     and describe it for the page. Runs in a worker thread."""
-    from ..api import dance
+    from ..api import analyse, dance
     from ..retarget.character import load_character
-    from ..retarget.solve import retarget
+    from ..retarget.humanoid import find_bones
+    from ..retarget.solve import retarget, source_ground
 
     # The user's file first: one that cannot be a character is refused before the dance is made.
     target = load_character(character, bone_map=bone_map) if isinstance(character, Path) else _character(character)
-    clip = dance(song_path, style=style, seed=seed, engine=engine, database=database)
-    moved = retarget(clip, target)
-    made = StoredDance(moved, target, song_path, title=song_path.name)
-    if made.has_mesh or target.source is not None:
+    music = analyse(song_path, structure=False)   # kept: a span re-danced needs no second analysis
+    clip = dance(music, style=style, seed=seed, engine=engine, database=database)
+    ground = source_ground(clip, find_bones(clip.skeleton, what="the dance's skeleton"))
+    moved = retarget(clip, target, source_ground=ground)
+    made = StoredDance(moved, target, song_path, title=song_path.name, music=music, provenance=clip.provenance,
+                       source=(clip.skeleton.names, ground))
+    return _described(made), made
+
+
+def _redance(old: StoredDance, start_s: float, end_s: float, seed: int | None, style: str | None,
+             motif: str | None, database) -> tuple[dict, StoredDance]:
+    """``old`` with a span danced again (``edit.redance_span``) on the same character and floor."""
+    from ..edit import redance_span
+    from ..retarget.solve import retarget
+
+    names, ground = old.source
+
+    def onto(part):
+        return retarget(part, old.character, source_ground=ground if part.skeleton.names == names else None)
+
+    edited, _ = redance_span(old.clip, old.music, start_s, end_s, database=database, provenance=old.provenance,
+                             seed=seed, style=style, motif=motif, onto=onto)
+    made = StoredDance(edited, old.character, old.song_path, title=old.title, upload_key=old.upload_key,
+                       music=old.music, provenance=edited.provenance, source=old.source, audio_url=old.audio_url)
+    return _described(made), made
+
+
+def _described(made: StoredDance) -> dict:
+    """The dance as the page reads it (its BVH, beats, bars, sections; what made it)."""
+    if made.has_mesh or made.character.source is not None:
         # The page asks for it next: make it here, in the dance's turn; a user's model is made while its
         # file is still there (it is removed once the request is answered).
         made.encoded("glb")
-    s = clip.provenance.summary
+    prov, moved = made.provenance, made.clip
+    s = prov.summary
     sections = [{"start_s": round(float(x["start_s"]), 4), "level": x["level"]} for x in s.get("sections", [])]
-    result = {"bvh": made.encoded("bvh").decode("utf-8"), "fps": moved.fps, "frames": moved.n_frames,
-              "duration_s": float(s["duration_s"]), "tempo_bpm": float(s["tempo_bpm"]),
-              "beats": [round(float(t), 4) for t in clip.provenance.music_beat_times_s],
-              "downbeats": [round(float(t), 4) for t, k in zip(clip.provenance.music_beat_times_s,
-                                                                clip.provenance.music_beat_in_bar) if k == 0],
-              "style": s["style"], "default_tempo": bool(s["default_tempo"]), "engine": s["engine"],
-              "character": target.name, "mesh": made.has_mesh, "joints": list(moved.skeleton.names),
-              "sections": sections, "beats_per_bar": int(s["beats_per_bar"]) if s.get("beats_per_bar") else None,
-              "form": [{"start_s": round(float(x["start_s"]), 3), "label": x["label"], "name": x["name"],
-                        "replays": x.get("repeats")} for x in s.get("form", {}).get("sections", [])]}
-    return result, made
+    beats = prov.music_beat_times_s
+    return {"bvh": made.encoded("bvh").decode("utf-8"), "fps": moved.fps, "frames": moved.n_frames,
+            "duration_s": float(s["duration_s"]), "tempo_bpm": float(s["tempo_bpm"]),
+            "beats": [round(float(t), 4) for t in beats],
+            "downbeats": [round(float(t), 4) for t, k in zip(beats, prov.music_beat_in_bar) if k == 0],
+            "style": s["style"], "default_tempo": bool(s["default_tempo"]), "engine": s["engine"],
+            "character": made.character.name, "mesh": made.has_mesh, "joints": list(moved.skeleton.names),
+            "sections": sections, "beats_per_bar": int(s["beats_per_bar"]) if s.get("beats_per_bar") else None,
+            "form": [{"start_s": round(float(x["start_s"]), 3), "label": x["label"], "name": x["name"],
+                      "replays": x.get("repeats")} for x in s.get("form", {}).get("sections", [])],
+            "edits": [{k: e[k] for k in ("start_s", "end_s", "seed", "style", "engine", "motif")}
+                      for e in s.get("edits", [])]}
 
 
 def serve(host: str = "127.0.0.1", port: int = 8000, *, log_level: str = "info", **app_options) -> None:

@@ -339,6 +339,11 @@ function drawTimeline() {
 	g.fillStyle = palette.bar;
 	for (const t of dance.downbeats) g.fillRect(x(t), h - 16, 1.5, 16);
 	g.fillStyle = palette.accent;
+	if (span) {
+		g.globalAlpha = 0.35;
+		g.fillRect(x(span.start), 0, x(span.end) - x(span.start), h);
+		g.globalAlpha = 1;
+	}
 	g.fillRect(x(audio.currentTime || 0) - 1, 0, 2, h);
 	timeline.setAttribute('aria-valuemax', dance.duration.toFixed(1));
 	timeline.setAttribute('aria-valuenow', (audio.currentTime || 0).toFixed(1));
@@ -350,11 +355,14 @@ function seekTo(t) {
 	audio.currentTime = Math.min(Math.max(t, 0), Math.max(dance.duration - 0.05, 0));
 }
 
+// A click or drag seeks; with Shift held, a drag selects the span to re-dance (on beats).
 timeline.addEventListener('pointerdown', (ev) => {
-	const seek = (e) => seekTo((e.offsetX / timeline.clientWidth) * (dance ? dance.duration : 0));
-	seek(ev);
+	const at = (e) => (e.offsetX / timeline.clientWidth) * (dance ? dance.duration : 0);
+	const anchor = at(ev);
+	const act = ev.shiftKey ? (e) => setSpan(anchor, at(e)) : (e) => seekTo(at(e));
+	act(ev);
 	timeline.setPointerCapture(ev.pointerId);
-	timeline.onpointermove = seek;
+	timeline.onpointermove = act;
 	timeline.onpointerup = () => { timeline.onpointermove = timeline.onpointerup = null; };
 });
 
@@ -370,6 +378,10 @@ document.addEventListener('keydown', (ev) => {
 		if (audio.paused) audio.play().catch(() => {}); else audio.pause();
 	} else if (key === 'j' || key === 'l') {
 		seekTo(t + (key === 'l' ? 10 : -10));
+	} else if (key === '[') { // the span to re-dance starts here (and ends a bar on, if it ended before)
+		setSpan(t, span && span.end > t + 0.1 ? span.end : t + barLength());
+	} else if (key === ']') { // ... or ends here
+		setSpan(span && span.start < t - 0.1 ? span.start : t - barLength(), t);
 	} else if (key === 'ArrowRight' || key === 'ArrowLeft') {
 		const i = lastAtOrBefore(marks, t + 1e-3);
 		const next = key === 'ArrowRight' ? marks[i + 1] : marks[Math.max(t - (marks[i] ?? 0) < 0.15 ? i - 1 : i, 0)];
@@ -380,6 +392,91 @@ document.addEventListener('keydown', (ev) => {
 	}
 	ev.preventDefault();
 });
+
+// ---- editing: re-dance a span of the dance on stage, undo ------------------------------
+// The span (seconds, on the dance's beats) is chosen on the timeline (Shift+drag), with the [ and ] keys,
+// or as the 4 bars from the bar playing; the server dances it again and joins it to the rest, which stays
+// as it was. Each edit is a new dance; Undo puts the one before back on stage (its figures are kept here).
+const edits = []; // the dances edits replaced, newest last: { stage, info }
+const EDITS_KEPT = 10;
+let span = null; // { start, end }
+
+const nearestBeat = (t) => dance.beats.reduce((best, b) => (Math.abs(b - t) < Math.abs(best - t) ? b : best),
+	dance.beats[0]);
+const barLength = () => (dance && dance.downbeats.length > 1
+	? (dance.downbeats[dance.downbeats.length - 1] - dance.downbeats[0]) / (dance.downbeats.length - 1) : 2);
+
+function setSpan(a, b) {
+	if (!dance || !dance.result || live || !dance.beats.length) return;
+	const [start, end] = [nearestBeat(Math.min(a, b)), nearestBeat(Math.max(a, b))];
+	span = end > start ? { start, end } : null;
+	if (span) $('edit-panel').open = true; // a span chosen on the timeline or by key: show what can be done with it
+	showSpan();
+}
+
+function showSpan() {
+	const beats = span ? dance.beats.filter((b) => b >= span.start - 1e-3 && b <= span.end + 1e-3).length - 1 : 0;
+	$('span').textContent = span ? `${clock(span.start)}–${clock(span.end)} (${beats} beats)`
+		: 'none yet: Shift+drag the timeline';
+	$('undo').disabled = !edits.length;
+	state.edit = { span, undo: edits.length };
+}
+
+function barsFromHere(n = 4) {
+	if (!dance || !dance.result) return;
+	const t = audio.currentTime || 0;
+	const bars = dance.downbeats.length ? dance.downbeats : dance.beats.filter((_, i) => i % 4 === 0);
+	const i = Math.max(lastAtOrBefore(bars, t + 1e-3), 0);
+	setSpan(bars[i], bars[i + n] ?? dance.beats[dance.beats.length - 1]);
+}
+
+function postRedance(url, form) {
+	return fetchRetrying(url, { method: 'POST', body: form }, (wait) => setStatus(wait
+		? `The server is busy; asking again in ${Math.round(wait / 1000)} s…` : 'Re-dancing the span…'));
+}
+
+async function redance(ev) {
+	ev.preventDefault();
+	if (!dance || !dance.result || live) return;
+	if (!span) {
+		setStatus('Select a span first: Shift+drag on the timeline, the [ and ] keys, or "4 bars from here".', true);
+		return;
+	}
+	const form = new FormData();
+	form.append('start_s', span.start.toFixed(4));
+	form.append('end_s', span.end.toFixed(4));
+	for (const [field, id] of [['seed', 'edit-seed'], ['style', 'edit-style'], ['motif', 'edit-motif']]) {
+		if ($(id).value.trim()) form.append(field, $(id).value.trim());
+	}
+	$('redance').disabled = true;
+	state.state = 'dancing';
+	setStatus('Re-dancing the span…');
+	const t0 = performance.now();
+	try {
+		const result = await postRedance(dance.result.redance_url, form);
+		state.timings.redance_ms = performance.now() - t0;
+		const figures = await buildFigures(result);
+		edits.push({ stage: dance, info: $('info').textContent });
+		if (edits.length > EDITS_KEPT) edits.shift();
+		const from = Math.max(span.start - barLength(), 0);
+		present(result, figures, true);
+		seekTo(from); // watch the new moves come in
+		audio.play().catch(() => {});
+	} catch (err) {
+		state.state = 'error';
+		state.error = String(err.message || err);
+		setStatus(`Could not re-dance the span: ${state.error}`, true);
+	} finally {
+		$('redance').disabled = false;
+	}
+}
+
+function undo() {
+	const last = edits.pop();
+	if (!last || live) return;
+	present(last.stage.result, last.stage.figures, true);
+	$('info').textContent = last.info;
+}
 
 // ---- the status line follows the music -------------------------------------------------
 function clock(t) {
@@ -488,6 +585,7 @@ async function loadChoices() {
 	for (const s of styles.styles) {
 		const tempo = `${Math.round(s.tempo_min_bpm)}-${Math.round(s.tempo_max_bpm)} bpm`;
 		$('style').add(new Option(`${s.name} (${s.genre}, ${tempo})`, s.name));
+		$('edit-style').add(new Option(`${s.name} (${s.genre}, ${tempo})`, s.name));
 		styleGenre[s.name] = s.genre;
 	}
 	for (const e of engines.engines) {
@@ -512,6 +610,49 @@ async function loadChoices() {
 }
 
 const PREVIOUS = 'Still on stage, the previous dance: ';
+
+// The stick figure of a dance's BVH and, where it has one, the character's mesh.
+async function buildFigures(result) {
+	const figures = { stick: buildStick(result.bvh) };
+	if (result.glb_url) {
+		setStatus('Dressing the character…');
+		figures.character = await buildCharacter(result.glb_url);
+	}
+	return figures;
+}
+
+// Put a dance on stage: its figures, marks, downloads and info line; the song is loaded from its start
+// unless ``sameSong`` (an edit or an undo: the music plays on where it is).
+function present(result, figures, sameSong = false) {
+	stopLive();
+	if (videoJob) cancelVideo(videoJob); // the video of the dance that leaves the stage is not wanted
+	showDance({ figures, beats: result.beats, downbeats: result.downbeats || [], sections: result.sections,
+		duration: result.duration_s, result });
+	offerFigures(Boolean(figures.character));
+	offerDownloads(result);
+	if (!sameSong) {
+		audio.pause();
+		audio.src = result.audio_url;
+		audio.currentTime = 0;
+	}
+	state.frames = result.frames;
+	state.beats = result.beats.length;
+	state.dance = { id: result.dance_id, engine: result.engine, character: result.character, mesh: result.mesh,
+		style: result.style, joints: result.joints, beats: result.beats, downbeats: result.downbeats,
+		edits: result.edits || [] };
+	const edited = (result.edits || []).length;
+	$('info').textContent = `${result.style} at ${result.tempo_bpm.toFixed(1)} bpm, ${result.beats.length} beats, ` +
+		`${result.duration_s.toFixed(1)} s · ${result.engine} engine · ${result.character}` +
+		(result.mesh ? '' : ' rig') + (result.default_tempo ? ' · no clear beat: a steady default tempo' : '') +
+		(result.form && result.form.length > 1 ? ' · form ' + result.form.map((s) => s.label).join(' ') +
+			' (' + result.form.filter((s) => s.replays !== null && s.replays !== undefined).length +
+			' sections danced again)' : '') +
+		(edited ? ` · ${edited} span${edited > 1 ? 's' : ''} re-danced` : '');
+	state.state = 'ready';
+	$('edit-panel').hidden = false;
+	showSpan();
+	followPlayback();
+}
 const OWN = ':own'; // the Character menu's "your own file" (no built-in is named so)
 
 // "Your own file" shows where to choose it (and its bone map, for a rig whose bones have unusual names).
@@ -550,33 +691,11 @@ async function requestDance(event) {
 	try {
 		const result = await postDance(form);
 		state.timings.dance_ms = performance.now() - t0;
-		const figures = { stick: buildStick(result.bvh) };
-		if (result.glb_url) {
-			setStatus('Dressing the character…');
-			figures.character = await buildCharacter(result.glb_url);
-		}
+		const figures = await buildFigures(result);
 		state.timings.figures_ms = performance.now() - t0 - state.timings.dance_ms;
-		stopLive();
-		if (videoJob) cancelVideo(videoJob); // the video of the dance that leaves the stage is not wanted
-		showDance({ figures, beats: result.beats, downbeats: result.downbeats || [], sections: result.sections,
-			duration: result.duration_s, result });
-		offerFigures(Boolean(figures.character));
-		offerDownloads(result);
-		audio.pause();
-		audio.src = result.audio_url;
-		audio.currentTime = 0;
-		state.frames = result.frames;
-		state.beats = result.beats.length;
-		state.dance = { id: result.dance_id, engine: result.engine, character: result.character, mesh: result.mesh,
-			style: result.style, joints: result.joints, beats: result.beats, downbeats: result.downbeats };
-		$('info').textContent = `${result.style} at ${result.tempo_bpm.toFixed(1)} bpm, ${result.beats.length} beats, ` +
-			`${result.duration_s.toFixed(1)} s · ${result.engine} engine · ${result.character}` +
-			(result.mesh ? '' : ' rig') + (result.default_tempo ? ' · no clear beat: a steady default tempo' : '') +
-			(result.form && result.form.length > 1 ? ' · form ' + result.form.map((s) => s.label).join(' ') +
-				' (' + result.form.filter((s) => s.replays !== null && s.replays !== undefined).length +
-				' sections danced again)' : '');
-		state.state = 'ready';
-		followPlayback();
+		edits.length = 0; // a new dance: the edits of the one before are not undone into it
+		span = null;
+		present(result, figures);
 		audio.play().catch(() => {}); // browsers may refuse autoplay; the play button works
 	} catch (err) {
 		state.state = 'error';
@@ -907,6 +1026,9 @@ function openLive(query, ctx, capture) {
 	$('info').textContent = mesh ? `Live: the ${character}` : `Live: the stick figure on the ${character} rig`;
 	offerFigures(false); // the stick figure until the character's mesh is here
 	offerDownloads(null);
+	$('edit-panel').hidden = true; // a live dance is not edited
+	edits.length = 0;
+	span = null;
 	const mine = live;
 	if (mesh) {
 		loadModel(`/api/characters/${encodeURIComponent(character)}.glb`).then((model) => {
@@ -995,6 +1117,9 @@ $('engine').addEventListener('change', fitChoices);
 $('style').addEventListener('change', fitChoices);
 $('file').addEventListener('change', () => { if ($('file').files.length) $('song').value = ''; });
 $('character').addEventListener('change', showOwnCharacter);
+$('edit-controls').addEventListener('submit', redance);
+$('select-bars').addEventListener('click', () => barsFromHere(4));
+$('undo').addEventListener('click', undo);
 // A song (or a character file) dropped anywhere on the page is danced at once, as if chosen and Dance pressed.
 document.addEventListener('dragover', (ev) => {
 	if (![...ev.dataTransfer.types].includes('Files')) return;
@@ -1019,7 +1144,7 @@ document.addEventListener('drop', (ev) => {
 });
 
 // The live controls are folded away on a small screen (the stage needs the room), open on a large one.
-$('live-panel').open = window.matchMedia('(min-width: 700px)').matches;
+$('live-panel').open = window.matchMedia('(min-width: 700px)').matches; // the edit panel opens when asked for
 const tLoad = performance.now();
 loadChoices().then(() => {
 	state.timings.choices_ms = performance.now() - tLoad;
