@@ -9,6 +9,7 @@ import shutil
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from serve_support import CLIENTS, VIDEO_SIZE
@@ -178,6 +179,15 @@ def test_the_dancer_fills_the_stage_while_playing_and_right_after_seeks(studio, 
         for box in boxes:
             assert box["height"] >= 0.40, (size, box)
             assert box["left"] > 0.0 and box["right"] < 1.0 and box["top"] > 0.0 and box["bottom"] < 1.0, (size, box)
+    # The follow view: the camera stands where the server's yaw (the MP4 camera's) says, and frames her too.
+    camera = report["camera"]
+    assert camera["rate_hz"] > 0 and len(camera["yaw"]) > 50
+    turned = np.unwrap([box["view_yaw"] for box in report["follow"]])
+    for box, yaw in zip(report["follow"], turned):
+        want = np.interp(box["t"] * camera["rate_hz"], np.arange(len(camera["yaw"])), camera["yaw"])
+        assert abs((yaw - want + np.pi) % (2 * np.pi) - np.pi) < 0.05, (box, want)
+        assert box["height"] >= 0.40 and 0 < box["left"] and box["right"] < 1, box
+    assert np.ptp(turned) > 0.3, "the follow view should turn with her over a minute of salsa"
 
 
 @needs_browser

@@ -167,6 +167,18 @@ try {
 			report.sizes[`${width}x${height}`] = boxes;
 			await page.screenshot({ path: `${outDir}/framing-${width}x${height}.png` });
 		}
+		// The follow view: the camera turns with the yaw the server sent (the MP4's).
+		await page.selectOption('#camera-view', 'follow');
+		report.camera = await page.evaluate(() => window.dancesynth.dance.camera);
+		report.follow = [];
+		for (const t of [5, 18, 33, 47, 59]) {
+			await page.evaluate((s) => { document.getElementById('audio').currentTime = s; }, t);
+			await page.waitForFunction((s) => Math.abs(document.getElementById('audio').currentTime - s) < 0.5, t);
+			await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
+			report.follow.push({ t: await page.evaluate(() => document.getElementById('audio').currentTime),
+				...await page.evaluate(() => window.dancesynthFrame()) });
+		}
+		await page.screenshot({ path: `${outDir}/framing-follow.png` });
 	} else if (scenario === 'timeline') {
 		await danceSong('Vibe_Ace');
 		await page.evaluate(() => { const a = document.getElementById('audio'); a.pause(); a.currentTime = 0; });

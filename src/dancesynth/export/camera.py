@@ -86,6 +86,14 @@ def plan_shot(clip: MotionClip, fig: Figure, aspect: float, body=None) -> Shot:
     return Shot(target, floor_y + 0.5 * height, floor_y, direction, float(distance), height)
 
 
+def follow_yaw(clip: MotionClip) -> np.ndarray:
+    """Per frame, where a following camera stands (radians about +y from +z, from the dancer): the video's
+    3/4 view of her low-passed facing (``plan_shot``), for a player that frames the dance as the video does."""
+    sample = np.unique(np.linspace(0, clip.n_frames - 1, min(clip.n_frames, 240)).astype(np.int64))
+    _, g_pos = clip_pose(clip, sample)
+    return _facing_yaw(clip, sample, g_pos) + np.radians(AZIMUTH_DEG)
+
+
 def _facings(clip, sample, pts) -> np.ndarray:
     """Horizontal unit facing at the ``sample`` frames (0 where unknown), from the hips (left hip minus
     right hip, crossed with up), else the root's +z."""

@@ -484,6 +484,7 @@ _FIELDS = {"audio": "a file", "song": "text", "style": "text", "seed": "text", "
            "character_file": "a file", "bone_map": "a file"}
 CHARACTER_SUFFIXES = (".glb", ".gltf", ".vrm", ".bvh")
 _EDIT_FIELDS = ("start_s", "end_s", "seed", "style", "motif")
+CAMERA_RATE_HZ = 10   # the follow view's yaw, sent this often a second (it is low-passed over seconds)
 
 
 # The library's advice names command-line options; a page user gets what they can do in the page.
@@ -608,8 +609,11 @@ def _described(made: StoredDance) -> dict:
         # The page asks for it next: make it here, in the dance's turn; a user's model is made while its
         # file is still there (it is removed once the request is answered).
         made.encoded("glb")
+    from ..export.camera import follow_yaw
+
     prov, moved = made.provenance, made.clip
     s = prov.summary
+    yaw = follow_yaw(moved)[::max(int(round(moved.fps / CAMERA_RATE_HZ)), 1)]
     sections = [{"start_s": round(float(x["start_s"]), 4), "level": x["level"]} for x in s.get("sections", [])]
     beats = prov.music_beat_times_s
     return {"bvh": made.encoded("bvh").decode("utf-8"), "fps": moved.fps, "frames": moved.n_frames,
@@ -622,7 +626,9 @@ def _described(made: StoredDance) -> dict:
             "form": [{"start_s": round(float(x["start_s"]), 3), "label": x["label"], "name": x["name"],
                       "replays": x.get("repeats")} for x in s.get("form", {}).get("sections", [])],
             "edits": [{k: e[k] for k in ("start_s", "end_s", "seed", "style", "engine", "motif")}
-                      for e in s.get("edits", [])]}
+                      for e in s.get("edits", [])],
+            "camera": {"rate_hz": moved.fps / max(int(round(moved.fps / CAMERA_RATE_HZ)), 1),
+                       "yaw": [round(float(y), 3) for y in yaw]}}
 
 
 def serve(host: str = "127.0.0.1", port: int = 8000, *, log_level: str = "info", **app_options) -> None:

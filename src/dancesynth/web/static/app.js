@@ -215,7 +215,23 @@ function poseAt(fig, t) {
 		const dx = x - controls.target.x, dz = z - controls.target.z;
 		controls.target.x += dx; controls.target.z += dz;
 		camera.position.x += dx; camera.position.z += dz;
+		const yaw = $('camera-view').value === 'follow' && followYaw(t);
+		if (yaw !== false) { // the video's camera: a 3/4 view of her facing, turning slowly with it
+			const [, up, away] = FOLLOW;
+			camera.position.set(controls.target.x + away * Math.sin(yaw), controls.target.y + up,
+				controls.target.z + away * Math.cos(yaw));
+		}
 	}
+}
+
+// The follow view's yaw at t (the server's, as the MP4's camera turns), or false where there is none.
+const FOLLOW = [0, 0.5, Math.hypot(1.5, 2.5)]; // the three-quarter view's height and distance
+function followYaw(t) {
+	const cam = dance && dance.result && dance.result.camera;
+	if (!cam || !cam.yaw.length) return false;
+	const i = Math.min(Math.max(t * cam.rate_hz, 0), cam.yaw.length - 1);
+	const a = Math.floor(i), b = Math.min(a + 1, cam.yaw.length - 1);
+	return cam.yaw[a] + (cam.yaw[b] - cam.yaw[a]) * (i - a);
 }
 
 const AIM_S = 1.0; // the camera aims at the hips' mean place over this long before and after the moment
@@ -251,7 +267,7 @@ function aimAt(fig, t) {
 const VIEWS = { 'three-quarter': [1.5, 0.5, 2.5], front: [0, 0.45, 2.9], side: [2.9, 0.45, 0] };
 
 function chooseView() {
-	const offset = VIEWS[$('camera-view').value];
+	const offset = VIEWS[$('camera-view').value] || ($('camera-view').value === 'follow' && VIEWS['three-quarter']);
 	if (offset) camera.position.set(controls.target.x + offset[0], controls.target.y + offset[1], controls.target.z + offset[2]);
 	controls.update();
 }
@@ -267,7 +283,8 @@ window.dancesynthFrame = () => {
 		o.getWorldPosition(_b).project(camera);
 		x0 = Math.min(x0, _b.x); x1 = Math.max(x1, _b.x); y0 = Math.min(y0, _b.y); y1 = Math.max(y1, _b.y);
 	});
-	return { left: (x0 + 1) / 2, right: (x1 + 1) / 2, top: (1 - y1) / 2, bottom: (1 - y0) / 2, height: (y1 - y0) / 2 };
+	return { left: (x0 + 1) / 2, right: (x1 + 1) / 2, top: (1 - y1) / 2, bottom: (1 - y0) / 2, height: (y1 - y0) / 2,
+		view_yaw: Math.atan2(camera.position.x - controls.target.x, camera.position.z - controls.target.z) };
 };
 
 // Index of the last value at or before t in a sorted list (binary search), -1 if none.
@@ -639,7 +656,7 @@ function present(result, figures, sameSong = false) {
 	state.beats = result.beats.length;
 	state.dance = { id: result.dance_id, engine: result.engine, character: result.character, mesh: result.mesh,
 		style: result.style, joints: result.joints, beats: result.beats, downbeats: result.downbeats,
-		edits: result.edits || [] };
+		edits: result.edits || [], camera: result.camera };
 	const edited = (result.edits || []).length;
 	$('info').textContent = `${result.style} at ${result.tempo_bpm.toFixed(1)} bpm, ${result.beats.length} beats, ` +
 		`${result.duration_s.toFixed(1)} s · ${result.engine} engine · ${result.character}` +
