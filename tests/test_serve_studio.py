@@ -179,7 +179,8 @@ def test_the_dancer_fills_the_stage_while_playing_and_right_after_seeks(studio, 
         for box in boxes:
             assert box["height"] >= 0.40, (size, box)
             assert box["left"] > 0.0 and box["right"] < 1.0 and box["top"] > 0.0 and box["bottom"] < 1.0, (size, box)
-    # The follow view: the camera stands where the server's yaw (the MP4 camera's) says, and frames her too.
+    # The follow view (the default): the camera stands where the server's yaw (the MP4 camera's) says.
+    assert report["default_view"] == "follow"
     camera = report["camera"]
     assert camera["rate_hz"] > 0 and len(camera["yaw"]) > 50
     turned = np.unwrap([box["view_yaw"] for box in report["follow"]])

@@ -167,7 +167,9 @@ try {
 			report.sizes[`${width}x${height}`] = boxes;
 			await page.screenshot({ path: `${outDir}/framing-${width}x${height}.png` });
 		}
-		// The follow view: the camera turns with the yaw the server sent (the MP4's).
+		// The follow view (the default): the camera turns with the yaw the server sent (the MP4's).
+		report.default_view = await page.evaluate(() => document.getElementById('camera-view').value);
+		await page.selectOption('#camera-view', 'three-quarter');
 		await page.selectOption('#camera-view', 'follow');
 		report.camera = await page.evaluate(() => window.dancesynth.dance.camera);
 		report.follow = [];
