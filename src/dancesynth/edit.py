@@ -5,8 +5,10 @@ span (with a bar of the music on each side, so the new moves are under way where
 another seed, another style or a chosen motif, and splices it in:
 
 - the new part is turned and moved so that at the span's first beat its root stands where the
-  dance's does, facing the same way, and the difference left at the last beat is spread over the span
-  (so the dance after the span goes on from where it was, unchanged);
+  dance's does, facing the same way; the difference left at the last beat is spread over the span, the
+  place's where the root travels and the facing's over its last ``TURN_S`` (so the dance after the
+  span goes on from where it was, unchanged, and planted feet are not slid all along the span);
+- planted feet are held through all this as the engines hold them through their blends (``engines.footlock``);
 - over ``blend_s`` after the first beat and before the last, the poses cross-fade (smoothstep weights,
   quaternions along the shorter arc), as a motion graph's transition does;
 - every frame outside the span is the dance's own, bit for bit.
@@ -27,6 +29,7 @@ from .errors import InputError
 from .types import MotionClip, MusicFeatures
 
 BLEND_S = 0.4        # the cross-fade at each end of the span (a motion graph's blends take 0.3 s)
+TURN_S = 2.0         # the facing's difference at the span's end is turned in over this long before it
 CONTEXT_BARS = 1     # the music danced on each side of the span, so the new moves are under way at its ends
 
 
@@ -66,9 +69,9 @@ def redance_part(music: MusicFeatures, a: int, b: int, fps: float, *, dance_part
 
 
 def splice(base: MotionClip, part: MotionClip, offset: int, fa: int, fb: int, *,
-           blend_s: float = BLEND_S) -> MotionClip:
+           blend_s: float = BLEND_S, foot_lock: bool = True) -> MotionClip:
     """``base`` with its frames ``fa .. fb`` from ``part`` (whose frame 0 stands for ``base``'s frame
-    ``offset``), aligned and cross-faded as the module says."""
+    ``offset``), aligned and cross-faded as the module says, its planted feet held (``foot_lock``)."""
     if part.skeleton.names != base.skeleton.names or part.fps != base.fps:
         raise InputError("the re-danced part is not on the dance's skeleton and frame rate; retarget it first")
     if not (0 <= fa < fb < base.n_frames and offset <= fa and fb - offset < part.n_frames):
@@ -84,11 +87,15 @@ def splice(base: MotionClip, part: MotionClip, offset: int, fa: int, fb: int, *,
     flat = np.array([1.0, 0.0, 1.0])
     p_pos = rot.apply(spin, (p_pos - p_pos[0]) * flat) + base.root_pos[fa] * flat + p_pos * (1 - flat)
     p_rot[:, 0] = rot.mul(spin, p_rot[:, 0])
-    # ... and end where it goes on from, the difference spread over the span.
-    ramp = _smoothstep((f - fa) / (fb - fa))
+    # ... and end where it goes on from, the difference spread over the span where the root travels (a
+    # dancer standing still is not slid: her planted feet would skate).
+    # The facing's difference is turned in over the span's last TURN_S (a turn spread over the whole span
+    # slides planted feet round all along it).
     drift_turn = _wrap(rot.heading(base.local_rot[fb, 0]) - rot.heading(p_rot[-1, 0]))
-    p_rot[:, 0] = rot.mul(rot.about_y(ramp * drift_turn), p_rot[:, 0])
-    p_pos += ramp[:, None] * ((base.root_pos[fb] - p_pos[-1]) * flat)
+    turn_from = max(fb - TURN_S * base.fps, fa)
+    p_rot[:, 0] = rot.mul(rot.about_y(_smoothstep((f - turn_from) / max(fb - turn_from, 1)) * drift_turn), p_rot[:, 0])
+    steps = np.linalg.norm(np.diff(p_pos * flat, axis=0), axis=1)
+    p_pos += _along(steps, f, fa, fb)[:, None] * ((base.root_pos[fb] - p_pos[-1]) * flat)
     # Cross-fade the poses in and out.
     width = max(min(blend_s * base.fps, (fb - fa) / 3), 1.0)
     weight = np.minimum(_smoothstep((f - fa) / width), _smoothstep((fb - f) / width))
@@ -104,8 +111,44 @@ def splice(base: MotionClip, part: MotionClip, offset: int, fa: int, fb: int, *,
     if base.contacts is not None and part.contacts is not None:
         contacts = base.contacts.copy()
         contacts[f] = np.where(weight[:, None] > 0.5, part.contacts[g], base.contacts[f])
-    return replace(base, root_pos=root_pos, local_rot=local_rot, local_pos=local_pos, contacts=contacts,
-                   meta=dict(base.meta))
+    edited = replace(base, root_pos=root_pos, local_rot=local_rot, local_pos=local_pos, contacts=contacts,
+                     meta=dict(base.meta))
+    if foot_lock:
+        edited.local_rot[f] = _feet_held(edited, f)
+    return edited
+
+
+def _feet_held(clip: MotionClip, f: np.ndarray) -> np.ndarray:
+    """The span's frames ``f`` of ``clip`` with its planted feet held (``engines.footlock``, as the engines
+    hold them through their blends): the cross-fades and the spread difference would slide them. The
+    contacts are the spliced motion's own; the last ``HOLD_END_S`` hold none, so every correction has
+    faded out when the span ends and the dance goes on as it was."""
+    from .engines.footlock import FootLockState, LockParams, lock_feet
+    from .engines.stitch import Rendered
+    from .errors import ModelError
+    from .motion.features import foot_contacts, foot_points
+    from .motion.roles import find_roles
+
+    try:
+        roles = find_roles(clip.skeleton)
+    except ModelError:   # no legs to hold
+        return clip.local_rot[f]
+    window = replace(clip, root_pos=clip.root_pos[f], local_rot=clip.local_rot[f],
+                     local_pos=None if clip.local_pos is None else clip.local_pos[f], contacts=None)
+    params = LockParams()
+    planted = foot_contacts(foot_points(window, roles), clip.fps)
+    planted[max(len(f) - int(np.ceil((params.release_s + params.ease_s) * clip.fps)) - 1, 0):] = False
+    frames = Rendered(window.local_rot, window.root_pos, planted, window.root_pos, window.local_rot, window.root_pos,
+                      np.zeros(len(f), bool))
+    held, _ = lock_feet(clip.skeleton, roles, frames, FootLockState(), fps=clip.fps, params=params)
+    return held
+
+
+def _along(amounts: np.ndarray, f: np.ndarray, fa: int, fb: int) -> np.ndarray:
+    """0 at ``fa`` to 1 at ``fb``, rising with the running sum of ``amounts`` (one per frame step), or
+    smoothly with time where they add up to nothing."""
+    total = np.r_[0.0, np.cumsum(amounts)]
+    return total / total[-1] if total[-1] > 1e-6 else _smoothstep((f - fa) / (fb - fa))
 
 
 def _smoothstep(x: np.ndarray) -> np.ndarray:
