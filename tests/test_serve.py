@@ -115,7 +115,7 @@ def glb_json(data: bytes) -> dict:
     return json.loads(data[20:20 + length])
 
 
-def test_downloads_are_valid_bvh_glb_and_vrma_files(server, tmp_path):
+def test_downloads_are_valid_bvh_glb_vrma_and_fbx_files(server, tmp_path):
     from dancesynth.io.bvh import read_bvh
 
     result = kept_dance(server)
@@ -134,6 +134,7 @@ def test_downloads_are_valid_bvh_glb_and_vrma_files(server, tmp_path):
     vrma = glb_json(files["vrma"])
     assert "VRMC_vrm_animation" in vrma["extensionsUsed"] and "VRMC_vrm_animation" in vrma["extensions"]
     assert vrma["animations"]
+    assert files["fbx"].startswith(b"Kaydara FBX Binary"), files["fbx"][:40]   # Blender's, for game engines
 
 
 def test_a_rig_without_a_mesh_downloads_its_skeleton_and_dance(server):
@@ -198,6 +199,8 @@ def test_a_users_character_file_dances_downloads_and_renders_and_is_not_kept(tmp
         gltf = glb_json(data)
         assert status == 200 and gltf["meshes"] and gltf["animations"][0]["name"] == "dance"
         assert 'filename="sorohanro_-_solo-trumpet-06-My_Avatar.glb"' in headers["content-disposition"]
+        status, _, fbx = request(srv, "GET", result["downloads"]["fbx"], timeout=180)   # made from the GLB kept
+        assert status == 200 and fbx.startswith(b"Kaydara FBX Binary"), fbx[:200]
         video = result["video_url"] + "?figure=character"
         request(srv, "POST", video)
         job, _ = wait_for_video(srv, video)

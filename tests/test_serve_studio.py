@@ -68,7 +68,7 @@ def test_the_menus_offer_only_what_the_engines_can_dance(studio, tmp_path):
 def test_a_dance_the_server_let_go_of_says_so(studio, tmp_path):
     report = run_studio(studio, tmp_path, "gone")
     assert "let this one go" in report["after_bvh"] and "press Dance" in report["after_bvh"], report
-    assert report["links"] == ["true", "true", "true"] and report["mp4_disabled"], report
+    assert report["links"] == ["true", "true", "true", "true"] and report["mp4_disabled"], report
     assert report["saved"] is None, "an empty or error file was saved"
 
 
@@ -105,6 +105,8 @@ def test_a_user_dances_their_own_character_and_downloads_it(studio, tmp_path):
     model = pygltflib.GLTF2().load(str(tmp_path / "own-glb.glb"))
     assert model.meshes and [a.name for a in model.animations][0] == "dance"
     assert report["saved_vrma"].endswith(".vrma") and (tmp_path / "own-vrma.vrma").read_bytes()[:4] == b"glTF"
+    assert report["saved_fbx"] == "sorohanro_-_solo-trumpet-06-My_Avatar.fbx"
+    assert (tmp_path / "own-fbx.fbx").read_bytes().startswith(b"Kaydara FBX Binary")
     evil = report["evil"]
     assert evil["state"] == "error" and "outside the model's folder" in evil["status"], evil
     assert "/tmp" not in evil["status"] and evil["info"].startswith("Still on stage, the previous dance: "), evil

@@ -101,7 +101,7 @@ try {
 		await page.waitForFunction(() => document.getElementById('notice').classList.contains('error'), null,
 			{ timeout: 10000 });
 		report.after_bvh = await page.evaluate(() => document.getElementById('notice').textContent);
-		report.links = await page.evaluate(() => ['bvh', 'glb', 'vrma'].map((k) =>
+		report.links = await page.evaluate(() => ['bvh', 'glb', 'vrma', 'fbx'].map((k) =>
 			document.getElementById(`dl-${k}`).getAttribute('aria-disabled')));
 		report.mp4_disabled = await page.evaluate(() => document.getElementById('dl-mp4').disabled);
 		await page.waitForTimeout(500);
@@ -243,8 +243,8 @@ try {
 		await page.setInputFiles('#character-file', { name: 'My Avatar.glb', mimeType: 'model/gltf-binary', buffer: glb });
 		await page.click('#dance');
 		report.own = await whenDanced(null);
-		for (const kind of ['glb', 'vrma']) {
-			const download = page.waitForEvent('download', { timeout: 60000 });
+		for (const kind of ['glb', 'vrma', 'fbx']) {
+			const download = page.waitForEvent('download', { timeout: 120000 });
 			await page.click(`#dl-${kind}`);
 			const file = await download;
 			report[`saved_${kind}`] = file.suggestedFilename();

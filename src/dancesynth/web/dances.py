@@ -27,7 +27,8 @@ from pathlib import Path
 from ..errors import DanceSynthError
 
 # What each download is, and how it is sent.
-DOWNLOADS = {"bvh": "text/plain; charset=utf-8", "glb": "model/gltf-binary", "vrma": "model/gltf-binary"}
+DOWNLOADS = {"bvh": "text/plain; charset=utf-8", "glb": "model/gltf-binary", "vrma": "model/gltf-binary",
+             "fbx": "application/octet-stream"}
 FIGURES = ("character", "stick")   # what a video draws: the character's mesh or the stick figure on its rig
 VIDEO_SIZE = (960, 540)
 RENDER_RETRY_S = 10   # a busy render queue asks the page to come back after this long
@@ -73,6 +74,7 @@ class StoredDance:
     source: tuple = ((), None)  # the skeleton it was danced on (joint names) and its floor, for the same retarget
     audio_url: str = ""
     files: dict[str, bytes] = field(default_factory=dict)
+    _encoding: threading.RLock = field(default_factory=threading.RLock, repr=False)
     renders: dict[str, Render] = field(default_factory=dict)
     forgotten: bool = False
 
@@ -88,12 +90,18 @@ class StoredDance:
         return f"{stem}-{self.character.name}{stick}.{suffix}"
 
     def encoded(self, kind: str) -> bytes:
-        """The dance as a ``kind`` file (bvh, glb, vrma), made once. Runs in a worker thread."""
-        if kind not in self.files:
-            from ..export.formats import encode_dance
+        """The dance as a ``kind`` file (bvh, glb, vrma, fbx), made once. Runs in a worker thread."""
+        with self._encoding:   # one Blender for an FBX asked for twice at once (re-entrant: the FBX needs the GLB)
+            if kind not in self.files:
+                if kind == "fbx":   # Blender converts our GLB (a user's model file is gone by now)
+                    from ..export.fbx import fbx_bytes
 
-            self.files[kind] = encode_dance("." + kind, self.clip, self.character)
-        return self.files[kind]
+                    self.files[kind] = fbx_bytes(self.encoded("glb"), fps=self.clip.fps, name="dance")
+                else:
+                    from ..export.formats import encode_dance
+
+                    self.files[kind] = encode_dance("." + kind, self.clip, self.character)
+            return self.files[kind]
 
 
 class DanceStore:

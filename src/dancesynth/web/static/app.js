@@ -736,10 +736,11 @@ const POLL_MS = 500;
 
 // The links to the dance's files, or none (null: a live dance has no files).
 function offerDownloads(result) {
-	for (const kind of ['bvh', 'glb', 'vrma']) {
+	for (const kind of ['bvh', 'glb', 'vrma', 'fbx']) {
 		const link = $(`dl-${kind}`);
 		if (result) link.href = result.downloads[kind];
 		else link.removeAttribute('href');
+		link.dataset.made = '';
 		link.setAttribute('aria-disabled', String(!result));
 	}
 	state.video = null;
@@ -832,10 +833,16 @@ async function downloadFile(event) {
 	if (link.dataset.checked === 'yes') { link.dataset.checked = ''; return; } // checked: let the browser save it
 	event.preventDefault();
 	if (link.getAttribute('aria-disabled') === 'true' || !link.href) return;
+	const slow = link.id === 'dl-fbx' && !link.dataset.made;
+	if (slow) notify('Making the FBX (Blender converts the dance on the server: a few seconds)…');
 	try {
 		const response = await fetch(link.href, { method: 'HEAD' });
 		if (response.status === 404) { danceGone(); return; }
-		if (!response.ok) throw new Error(`HTTP ${response.status}`);
+		if (!response.ok) {
+			const body = await fetch(link.href).then((r) => r.json()).catch(() => ({}));
+			throw new Error(body.error || `HTTP ${response.status}`);
+		}
+		if (slow) { notify(''); link.dataset.made = 'yes'; }
 		link.dataset.checked = 'yes';
 		link.click();
 	} catch (err) {
@@ -1129,7 +1136,7 @@ $('volume').addEventListener('input', () => {
 	if (live && !(live.capture && !live.capture.echo)) live.out.gain.value = volume;
 });
 $('dl-mp4').addEventListener('click', downloadVideo);
-for (const kind of ['bvh', 'glb', 'vrma']) $(`dl-${kind}`).addEventListener('click', downloadFile);
+for (const kind of ['bvh', 'glb', 'vrma', 'fbx']) $(`dl-${kind}`).addEventListener('click', downloadFile);
 $('engine').addEventListener('change', fitChoices);
 $('style').addEventListener('change', fitChoices);
 $('file').addEventListener('change', () => { if ($('file').files.length) $('song').value = ''; });
