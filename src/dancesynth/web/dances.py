@@ -31,6 +31,7 @@ DOWNLOADS = {"bvh": "text/plain; charset=utf-8", "glb": "model/gltf-binary", "vr
              "fbx": "application/octet-stream"}
 FIGURES = ("character", "stick")   # what a video draws: the character's mesh or the stick figure on its rig
 VIDEO_SIZE = (960, 540)
+_BLENDER = threading.BoundedSemaphore(1)   # one Blender at a time for the FBX downloads (a whole Blender each)
 RENDER_RETRY_S = 10   # a busy render queue asks the page to come back after this long
 
 
@@ -96,7 +97,9 @@ class StoredDance:
                 if kind == "fbx":   # Blender converts our GLB (a user's model file is gone by now)
                     from ..export.fbx import fbx_bytes
 
-                    self.files[kind] = fbx_bytes(self.encoded("glb"), fps=self.clip.fps, name="dance")
+                    glb = self.encoded("glb")
+                    with _BLENDER:
+                        self.files[kind] = fbx_bytes(glb, fps=self.clip.fps, name="dance")
                 else:
                     from ..export.formats import encode_dance
 
