@@ -306,7 +306,7 @@ def test_library_advice_for_the_command_line_is_reworded_for_the_page():
 @pytest.mark.parametrize("path, method, code, words", [
     ("/api/dances/0123456789abcdef0123456789abcdef/dance.glb", "GET", 404, "no such dance"),
     ("/api/dances/0123456789abcdef0123456789abcdef/video", "POST", 404, "no such dance"),
-    ("/api/dances/{id}/dance.fbx", "GET", 404, "formats"),
+    ("/api/dances/{id}/dance.obj", "GET", 404, "formats"),
     ("/api/dances/{id}/dance.mp4", "GET", 404, "not rendered"),
     ("/api/dances/{id}/video?figure=ghost", "POST", 400, "figure"),
     ("/api/dances/{id}/dance.bvh", "POST", 405, ""),
