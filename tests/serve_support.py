@@ -1,5 +1,5 @@
 """What the `dancesynth serve` tests share: the app under uvicorn, the bundled songs over HTTP, raw
-requests, multipart forms, and what a rendered video must be."""
+requests, multipart forms, a kept dance, a GLB's JSON, waiting for a video, and what a rendered video must be."""
 
 from __future__ import annotations
 
@@ -150,3 +150,32 @@ def song_pcm(path: Path, rate: int, seconds: float) -> bytes:
     y, sr = sf.read(path, dtype="float32", frames=int(seconds * sf.info(path).samplerate))
     y = soxr.resample(y.mean(axis=1) if y.ndim > 1 else y, sr, rate)
     return (np.clip(y, -1, 1) * 32767).astype("<i2").tobytes()
+
+
+def kept_dance(server, character="mannequin", song=TRUMPET.name):
+    status, result = post_dance(server, {"song": song, "character": character, "seed": "2"})
+    assert status == 200, result
+    return result
+
+
+def glb_json(data: bytes) -> dict:
+    """The JSON chunk of a GLB (after the 12-byte header and the chunk's own 8)."""
+    assert data[:4] == b"glTF"
+    length = int.from_bytes(data[12:16], "little")
+    assert data[16:20] == b"JSON"
+    return json.loads(data[20:20 + length])
+
+
+def wait_for_video(server, url: str, timeout_s: float = 90.0) -> tuple[dict, list[str]]:
+    """Poll a video's status until it is over; (the last answer, every state seen)."""
+    deadline = time.monotonic() + timeout_s
+    states = []
+    while time.monotonic() < deadline:
+        status, _, data = request(server, "GET", url)
+        job = json.loads(data)
+        assert status in (200, 202), job
+        states.append(job["state"])
+        if job["state"] not in ("queued", "rendering"):
+            return job, states
+        time.sleep(0.2)
+    raise AssertionError(f"the video was not done within {timeout_s} s: {states[-5:]}")

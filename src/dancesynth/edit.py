@@ -57,17 +57,6 @@ def music_part(music: MusicFeatures, first: int, last: int, shift_s: float) -> M
                    beat_in_bar=None if music.beat_in_bar is None else music.beat_in_bar[first:last + 1])
 
 
-def redance_part(music: MusicFeatures, a: int, b: int, fps: float, *, dance_part) -> tuple[MotionClip, int]:
-    """The span's beats ``a .. b`` danced again with a bar of context each side: ``dance_part(part_music,
-    shift_s)`` makes the dance (it adds the seed, style, motif); returns it and the dance's frame its
-    first frame stands for."""
-    per_bar = music.beats_per_bar or 4
-    first, last = max(a - CONTEXT_BARS * per_bar, 0), min(b + CONTEXT_BARS * per_bar, music.n_beats - 1)
-    offset = int(np.floor(music.beat_times_s[first] * fps))   # whole frames, so frame times line up
-    part = dance_part(music_part(music, first, last, offset / fps), offset / fps)
-    return part, offset
-
-
 def splice(base: MotionClip, part: MotionClip, offset: int, fa: int, fb: int, *,
            blend_s: float = BLEND_S, foot_lock: bool = True) -> MotionClip:
     """``base`` with its frames ``fa .. fb`` from ``part`` (whose frame 0 stands for ``base``'s frame
@@ -133,8 +122,7 @@ def _feet_held(clip: MotionClip, f: np.ndarray) -> np.ndarray:
         roles = find_roles(clip.skeleton)
     except ModelError:   # no legs to hold
         return clip.local_rot[f]
-    window = replace(clip, root_pos=clip.root_pos[f], local_rot=clip.local_rot[f],
-                     local_pos=None if clip.local_pos is None else clip.local_pos[f], contacts=None)
+    window = clip.frames(int(f[0]), int(f[-1]) + 1)
     params = LockParams()
     planted = foot_contacts(foot_points(window, roles), clip.fps)
     planted[max(len(f) - int(np.ceil((params.release_s + params.ease_s) * clip.fps)) - 1, 0):] = False
@@ -185,13 +173,15 @@ def redance_span(clip: MotionClip, music: MusicFeatures, start_s: float, end_s: 
     if motif:
         config = replace(config, engine="choreography", follow_signature=False, lookahead_s=0.0, model=None)
     beats = music.beat_times_s
-
-    def dance_part(part_music: MusicFeatures, shift_s: float) -> MotionClip:
-        at = () if not motif else ((float((beats[a] + beats[a + 1]) / 2 - shift_s), motif),)
-        part = dance(part_music, config=replace(config, motif_at=at), database=database)
-        return onto(part) if onto is not None else part
-
-    part, offset = redance_part(music, a, b, clip.fps, dance_part=dance_part)
+    # The span with a bar of context each side, as a song of its own from a whole frame of the dance.
+    per_bar = music.beats_per_bar or 4
+    first, last = max(a - CONTEXT_BARS * per_bar, 0), min(b + CONTEXT_BARS * per_bar, music.n_beats - 1)
+    offset = int(np.floor(beats[first] * clip.fps))
+    shift_s = offset / clip.fps
+    at = () if not motif else ((float((beats[a] + beats[a + 1]) / 2 - shift_s), motif),)
+    part = dance(music_part(music, first, last, shift_s), config=replace(config, motif_at=at), database=database)
+    if onto is not None:
+        part = onto(part)
     fa, fb = (int(round(beats[i] * clip.fps)) for i in (a, b))
     edited = splice(clip, part, offset, fa, fb, blend_s=blend_s)
     record = {"start_s": float(beats[a]), "end_s": float(beats[b]), "beats": [a, b], "seed": seed,

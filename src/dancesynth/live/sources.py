@@ -80,7 +80,28 @@ class Chunk:
     start_s: float           # stream time of the first sample
 
 
-class AudioSource:
+def _pcm16(data: bytes) -> np.ndarray:
+    """16-bit little-endian PCM as float32 samples in [-1, 1)."""
+    return np.frombuffer(data, dtype="<i2").astype(np.float32) / 32768.0
+
+
+class _Stamped:
+    """A source's clock: the stream time of each chunk, counted in the samples read so far."""
+
+    sr: int
+    _samples: int
+
+    def _stamped(self, samples: np.ndarray) -> Chunk:
+        chunk = Chunk(samples, self._samples / self.sr)
+        self._samples += samples.size
+        return chunk
+
+    @property
+    def heard_s(self) -> float:
+        return self._samples / self.sr
+
+
+class AudioSource(_Stamped):
     """Mono float32 chunks from ffmpeg; ``read(timeout)`` returns a ``Chunk``, ``None`` on a stall, or raises StopIteration at the end.
 
     After the end, ``error`` is empty if the source ended as it should, else why it broke off:
@@ -282,14 +303,7 @@ class AudioSource:
         if data is None:
             self._done = True
             raise StopIteration
-        samples = np.frombuffer(data, dtype="<i2").astype(np.float32) / 32768.0
-        chunk = Chunk(samples, self._samples / self.sr)
-        self._samples += samples.size
-        return chunk
-
-    @property
-    def heard_s(self) -> float:
-        return self._samples / self.sr
+        return self._stamped(_pcm16(data))
 
     def close(self) -> None:
         self._closing = True  # ffmpeg stopped by us has not failed
@@ -308,7 +322,7 @@ class AudioSource:
         self.close()
 
 
-class PushedAudio:
+class PushedAudio(_Stamped):
     """Audio handed over by the caller as it arrives (the page's tab or microphone capture, sent over a
     WebSocket): 16-bit mono PCM at ``rate``, resampled to ``sr`` (soxr, one stream, so chunk edges leave
     no trace). Read like an ``AudioSource``; ``push`` and ``end`` may come from another thread. The
@@ -349,19 +363,13 @@ class PushedAudio:
             data = ("end", f"no audio came for {self._stall_end_s:g} s")
         self._last = time.monotonic()
         last = isinstance(data, tuple)
-        pcm = np.zeros(0, np.float32) if last else np.frombuffer(data, dtype="<i2").astype(np.float32) / 32768.0
+        pcm = np.zeros(0, np.float32) if last else _pcm16(data)
         samples = self._resampler.resample_chunk(pcm, last=last)
         if last:
             self._done, self.error = True, data[1]
             if not samples.size:
                 raise StopIteration
-        chunk = Chunk(samples, self._samples / self.sr)
-        self._samples += samples.size
-        return chunk
-
-    @property
-    def heard_s(self) -> float:
-        return self._samples / self.sr
+        return self._stamped(samples)
 
     def close(self) -> None:
         self.end()

@@ -50,6 +50,7 @@ from ..defaults import MAX_SONG_S
 from ..types import MAX_SEED
 from .dances import DOWNLOADS, FIGURES, RENDER_RETRY_S, VIDEO_SIZE, DanceStore, StoredDance
 from .live import MAX_CAPTURE_S, LiveHub, parse_seed, watch
+from .making import builtin_character, make_dance, redance, rest_glb
 from .uploads import UploadStore
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
@@ -168,7 +169,7 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
     songs = {s["name"]: s for s in bundled_songs()}
     dances = DanceQueue(max_concurrent_dances, max_waiting_dances)
     hub = LiveHub(database, max_streams=max_live_streams, max_lag_s=max_viewer_lag_s, realtime=live_realtime,
-                  load_character=_character, max_capture_s=max_capture_s)
+                  load_character=builtin_character, max_capture_s=max_capture_s)
     kept = DanceStore(max_dances=max_stored_dances, max_renders=max_renders, max_waiting_renders=max_waiting_renders,
                       video_size=video_size)
     default_engine = DanceConfig().engine
@@ -179,10 +180,14 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
     async def index(request: Request) -> Response:
         return FileResponse(STATIC_DIR / "index.html", media_type="text/html")
 
-    async def api_styles(request: Request) -> Response:
+    async def styles() -> list:
+        """The database's styles, listed once."""
         if not styles_cache:
             styles_cache.extend(await run_in_threadpool(list_styles, database))
-        return JSONResponse({"styles": styles_cache})
+        return styles_cache
+
+    async def api_styles(request: Request) -> Response:
+        return JSONResponse({"styles": await styles()})
 
     async def api_limits(request: Request) -> Response:
         """What the page tells the user before an upload: the largest file and the longest song."""
@@ -193,14 +198,16 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
         engines = [{"name": e, "description": ENGINE_NOTES.get(e, ""), "genres": engine_genres.get(e)} for e in ENGINES]
         return JSONResponse({"engines": engines, "default": default_engine})
 
-    async def style_genre(name: str) -> str | None:
-        if not styles_cache:
-            styles_cache.extend(await run_in_threadpool(list_styles, database))
-        return next((s["genre"] for s in styles_cache if s["name"] == name), None)
+    async def beyond(engine: str, style: str | None) -> list[str] | None:
+        """The only genres ``engine`` can dance here, when ``style`` is not of them; else None."""
+        genres = engine_genres.get(engine)
+        if not style or genres is None:
+            return None
+        return None if next((s["genre"] for s in await styles() if s["name"] == style), None) in genres else genres
 
     async def api_characters(request: Request) -> Response:
         if not characters_cache:
-            loaded = await run_in_threadpool(lambda: [_character(n) for n in LAYOUTS])
+            loaded = await run_in_threadpool(lambda: [builtin_character(n) for n in LAYOUTS])
             characters_cache.extend({"name": c.name, "description": DESCRIPTIONS.get(c.name, ""),
                                      "mesh": c.mesh is not None, "joints": c.skeleton.n_joints} for c in loaded)
         return JSONResponse({"characters": characters_cache, "default": DEFAULT_CHARACTER})
@@ -211,7 +218,7 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
         name = request.path_params["name"]
         if name not in LAYOUTS:
             return _error(404, f"no character named {name[:40]!r}; pick one of {', '.join(LAYOUTS)} (/api/characters)")
-        data = await run_in_threadpool(_rest_glb, name)
+        data = await run_in_threadpool(rest_glb, name)
         return Response(data, media_type="model/gltf-binary", headers={"Cache-Control": "max-age=3600"})
 
     async def api_songs(request: Request) -> Response:
@@ -255,15 +262,14 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
             if problem:
                 return _error(400, problem)
             style = _text(form, "style") or None
-            seed_text = _text(form, "seed")
-            seed = parse_seed(seed_text)
+            seed = parse_seed(_text(form, "seed"))
             if seed is False:
-                return _error(400, f"seed {seed_text!r} must be a whole number from 0 to {MAX_SEED} (e.g. 7) or empty")
+                return _error(400, _bad_seed(_text(form, "seed")))
             engine = _text(form, "engine") or default_engine
             if engine not in ENGINES:
                 return _error(400, f"unknown engine {engine[:40]!r}; pick one of {', '.join(ENGINES)} (/api/engines)")
-            genres = engine_genres.get(engine)
-            if style and genres is not None and await style_genre(style) not in genres:
+            genres = await beyond(engine, style)
+            if genres:
                 return _error(400, f"the {engine} engine has learned only {' and '.join(genres)} here; pick a "
                                    f"{' or '.join(genres)} style (or the best match for the tempo), or another engine")
             character = _text(form, "character") or DEFAULT_CHARACTER
@@ -303,7 +309,7 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
                 audio_url = f"/api/uploads/{upload_key}"
             else:
                 song_path, audio_url, shown = MUSIC_DIR / song_name, songs[song_name]["url"], song_name
-            result, made = await dances.run(_make_dance, song_path, style, seed, engine, character, database,
+            result, made = await dances.run(make_dance, song_path, style, seed, engine, character, database,
                                             folder / "bone_map.toml" if bone_map is not None else None)
         except DanceSynthError as exc:
             if upload_key:
@@ -355,17 +361,17 @@ def create_app(*, database=None, max_upload_mb: float = 50, max_concurrent_dance
                 return _error(400, "start_s and end_s must be numbers of seconds (the span to dance again)")
             seed = parse_seed(fields.get("seed"))
             if seed is False:
-                return _error(400, f"seed {fields['seed']!r} must be a whole number from 0 to {MAX_SEED} or empty")
+                return _error(400, _bad_seed(fields["seed"]))
             style, motif = fields.get("style") or None, fields.get("motif") or None
             if motif is not None and not re.fullmatch(r"M\d{1,4}", motif):
                 return _error(400, f"motif {motif[:20]!r} must be a motif's name, e.g. M17")
-            genres = engine_genres.get(dance.provenance.engine)
-            if style and not motif and genres is not None and await style_genre(style) not in genres:
+            genres = None if motif else await beyond(dance.provenance.engine, style)
+            if genres:
                 return _error(400, f"the {dance.provenance.engine} engine has learned only {' and '.join(genres)} "
                                    "here; pick one of its styles, or a motif (danced by the choreography engine)")
             if dances.full():
                 return busy(f"{dances.queued} dances")
-            result, made = await dances.run(_redance, dance, start_s, end_s, seed, style, motif, database)
+            result, made = await dances.run(redance, dance, start_s, end_s, seed, style, motif, database)
         except DanceSynthError as exc:
             return _error(400 if isinstance(exc, InputError) else 500, _for_the_page(str(exc)))
         finally:
@@ -484,7 +490,6 @@ _FIELDS = {"audio": "a file", "song": "text", "style": "text", "seed": "text", "
            "character_file": "a file", "bone_map": "a file"}
 CHARACTER_SUFFIXES = (".glb", ".gltf", ".vrm", ".bvh")
 _EDIT_FIELDS = ("start_s", "end_s", "seed", "style", "motif")
-CAMERA_RATE_HZ = 10   # the follow view's yaw, sent this often a second (it is low-passed over seconds)
 
 
 # The library's advice names command-line options; a page user gets what they can do in the page.
@@ -496,6 +501,10 @@ _PAGE_WORDING = (
     ("keep the files a .gltf names next to it", "the page takes one file: export the model as .glb (glTF "
                                                 "binary), which holds them all"),
 )
+
+
+def _bad_seed(text: str) -> str:
+    return f"seed {text!r} must be a whole number from 0 to {MAX_SEED} (e.g. 7) or empty"
 
 
 def _for_the_page(message: str) -> str:
@@ -544,91 +553,6 @@ def _video_figure(request: Request, dance: StoredDance) -> str | None:
     if figure not in FIGURES:
         return None
     return figure if dance.has_mesh else "stick"
-
-
-@functools.lru_cache(maxsize=None)
-def _character(name: str):
-    """A built-in character (``retarget.rigs.LAYOUTS``), loaded once: they never change."""
-    from ..retarget.character import load_character
-
-    return load_character(name)
-
-
-@functools.lru_cache(maxsize=None)
-def _rest_glb(name: str) -> bytes:
-    """A built-in character standing in its rest pose (one frame), as GLB bytes, made once."""
-    from ..export.formats import encode_dance
-    from ..types import MotionClip
-
-    target = _character(name)
-    rest = MotionClip(target.skeleton, 30.0, target.rest_root[None], target.rest_rot[None])
-    return encode_dance(".glb", rest, target)
-
-
-def _make_dance(song_path: Path, style: str | None, seed: int | None, engine: str, character: str | Path,
-                database, bone_map: Path | None = None) -> tuple[dict, StoredDance]:
-    """Dance, move the dance onto ``character`` (a built-in's name, or a user's file with its ``bone_map``),
-    and describe it for the page. Runs in a worker thread."""
-    from ..api import analyse, dance
-    from ..retarget.character import load_character
-    from ..retarget.humanoid import find_bones
-    from ..retarget.solve import retarget, source_ground
-
-    # The user's file first: one that cannot be a character is refused before the dance is made.
-    target = load_character(character, bone_map=bone_map) if isinstance(character, Path) else _character(character)
-    music = analyse(song_path, structure=False)   # kept: a span re-danced needs no second analysis
-    clip = dance(music, style=style, seed=seed, engine=engine, database=database)
-    ground = source_ground(clip, find_bones(clip.skeleton, what="the dance's skeleton"))
-    moved = retarget(clip, target, source_ground=ground)
-    made = StoredDance(moved, target, song_path, title=song_path.name, music=music, provenance=clip.provenance,
-                       source=(clip.skeleton.names, ground))
-    return _described(made), made
-
-
-def _redance(old: StoredDance, start_s: float, end_s: float, seed: int | None, style: str | None,
-             motif: str | None, database) -> tuple[dict, StoredDance]:
-    """``old`` with a span danced again (``edit.redance_span``) on the same character and floor."""
-    from ..edit import redance_span
-    from ..retarget.solve import retarget
-
-    names, ground = old.source
-
-    def onto(part):
-        return retarget(part, old.character, source_ground=ground if part.skeleton.names == names else None)
-
-    edited, _ = redance_span(old.clip, old.music, start_s, end_s, database=database, provenance=old.provenance,
-                             seed=seed, style=style, motif=motif, onto=onto)
-    made = StoredDance(edited, old.character, old.song_path, title=old.title, upload_key=old.upload_key,
-                       music=old.music, provenance=edited.provenance, source=old.source, audio_url=old.audio_url)
-    return _described(made), made
-
-
-def _described(made: StoredDance) -> dict:
-    """The dance as the page reads it (its BVH, beats, bars, sections; what made it)."""
-    if made.has_mesh or made.character.source is not None:
-        # The page asks for it next: make it here, in the dance's turn; a user's model is made while its
-        # file is still there (it is removed once the request is answered).
-        made.encoded("glb")
-    from ..export.camera import follow_yaw
-
-    prov, moved = made.provenance, made.clip
-    s = prov.summary
-    yaw = follow_yaw(moved)[::max(int(round(moved.fps / CAMERA_RATE_HZ)), 1)]
-    sections = [{"start_s": round(float(x["start_s"]), 4), "level": x["level"]} for x in s.get("sections", [])]
-    beats = prov.music_beat_times_s
-    return {"bvh": made.encoded("bvh").decode("utf-8"), "fps": moved.fps, "frames": moved.n_frames,
-            "duration_s": float(s["duration_s"]), "tempo_bpm": float(s["tempo_bpm"]),
-            "beats": [round(float(t), 4) for t in beats],
-            "downbeats": [round(float(t), 4) for t, k in zip(beats, prov.music_beat_in_bar) if k == 0],
-            "style": s["style"], "default_tempo": bool(s["default_tempo"]), "engine": s["engine"],
-            "character": made.character.name, "mesh": made.has_mesh, "joints": list(moved.skeleton.names),
-            "sections": sections, "beats_per_bar": int(s["beats_per_bar"]) if s.get("beats_per_bar") else None,
-            "form": [{"start_s": round(float(x["start_s"]), 3), "label": x["label"], "name": x["name"],
-                      "replays": x.get("repeats")} for x in s.get("form", {}).get("sections", [])],
-            "edits": [{k: e[k] for k in ("start_s", "end_s", "seed", "style", "engine", "motif")}
-                      for e in s.get("edits", [])],
-            "camera": {"rate_hz": moved.fps / max(int(round(moved.fps / CAMERA_RATE_HZ)), 1),
-                       "yaw": [round(float(y), 3) for y in yaw]}}
 
 
 def serve(host: str = "127.0.0.1", port: int = 8000, *, log_level: str = "info", **app_options) -> None:

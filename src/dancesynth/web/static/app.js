@@ -447,11 +447,6 @@ function barsFromHere(n = 4) {
 	setSpan(bars[i], bars[i + n] ?? dance.beats[dance.beats.length - 1]);
 }
 
-function postRedance(url, form) {
-	return fetchRetrying(url, { method: 'POST', body: form }, (wait) => setStatus(wait
-		? `The server is busy; asking again in ${Math.round(wait / 1000)} s…` : 'Re-dancing the span…'));
-}
-
 async function redance(ev) {
 	ev.preventDefault();
 	if (!dance || !dance.result || live) return;
@@ -470,7 +465,7 @@ async function redance(ev) {
 	setStatus('Re-dancing the span…');
 	const t0 = performance.now();
 	try {
-		const result = await postRedance(dance.result.redance_url, form);
+		const result = await postForm(dance.result.redance_url, form, 'Re-dancing the span…');
 		state.timings.redance_ms = performance.now() - t0;
 		const figures = await buildFigures(result);
 		edits.push({ stage: dance, info: $('info').textContent });
@@ -563,11 +558,13 @@ async function fetchRetrying(url, options, onWait) {
 	}
 }
 
-function postDance(form) {
-	return fetchRetrying('/api/dance', { method: 'POST', body: form }, (wait) => setStatus(wait
-		? `The server is busy; asking again in ${Math.round(wait / 1000)} s…`
-		: 'Listening to the music and choreographing…'));
+// POST a form, saying ``doing`` while the server works and how long a busy server asks the page to wait.
+function postForm(url, form, doing) {
+	return fetchRetrying(url, { method: 'POST', body: form }, (wait) => setStatus(wait
+		? `The server is busy; asking again in ${Math.round(wait / 1000)} s…` : doing));
 }
+
+const postDance = (form) => postForm('/api/dance', form, 'Listening to the music and choreographing…');
 
 let characterInfo = {}; // the built-in characters by name: { name, description, mesh, joints }
 
