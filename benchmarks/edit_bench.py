@@ -16,6 +16,8 @@ skeleton, and for the choreography engine with a chosen motif. Per edit:
   with a hard cut (one-frame cross-fade): what the blend buys; and the dance's own transitions' worst;
 - **one-frame steps**: single-joint snaps (``eval.artefacts.one_frame_steps``) of the edited dance not in
   the original (0 is the guard);
+- **visible accents in the span** over their chance level, beside the original dance's and a random walk's
+  on the same span (``bench.quality.walk_dance``, seed 1);
 - **foot skate in the span** (``foot_skate``, m/s) beside the original's in the same span, and the frames
   outside the span left bit for bit as they were.
 
@@ -73,10 +75,7 @@ def measure(original, edited, start_s, end_s, p99, skeleton_steps) -> dict:
     jumps = mm.angular_velocity_jumps(edited)
     joins = [float(jumps[np.clip(f, 0, len(jumps) - 1)].max()) for f in join_frames(edited, start_s, end_s)]
     fa, fb = round(start_s * edited.fps), round(end_s * edited.fps)
-    window = slice(fa, fb + 1)
-    part = lambda c: type(c)(skeleton=c.skeleton, fps=c.fps, root_pos=c.root_pos[window],  # noqa: E731
-                             local_rot=c.local_rot[window])
-    skates = mm.foot_skate(part(edited)), mm.foot_skate(part(original))
+    skates = mm.foot_skate(edited.frames(fa, fb + 1)), mm.foot_skate(original.frames(fa, fb + 1))
     steps = {tuple(s) for s in one_frame_steps(edited).tolist()} - skeleton_steps
     same_outside = bool(np.array_equal(edited.local_rot[:fa], original.local_rot[:fa])
                         and np.array_equal(edited.local_rot[fb + 1:], original.local_rot[fb + 1:])
@@ -87,11 +86,24 @@ def measure(original, edited, start_s, end_s, p99, skeleton_steps) -> dict:
             "foot_skate_vs_original": float(skates[0] / max(skates[1], 1e-9)), "outside_unchanged": same_outside}
 
 
+def span_accents(clip, music, start_s: float, end_s: float, ref) -> float | None:
+    """Visible accents in the span (``evaluate``'s kinematic beats as deep as the mocap's, on a music beat)
+    over their chance level (the same beats circularly shifted)."""
+    from dancesynth.eval.evaluate import evaluate
+
+    fa, fb = round(start_s * clip.fps), round(end_s * clip.fps)
+    beats = music.beat_times_s
+    inside = (beats >= start_s - 1e-6) & (beats <= end_s + 1e-6)
+    return evaluate(clip.frames(fa, fb + 1), music_beats_s=beats[inside] - fa / clip.fps,
+                    mocap=ref)["visible_accent_precision_x_chance"]
+
+
 def library_rows(music, db, bars: int) -> list[dict]:
     from dancesynth.api import dance
     from dancesynth.edit import redance_span
     from dancesynth.eval import motion_metrics as mm
     from dancesynth.eval.artefacts import one_frame_steps
+    from dancesynth.bench.quality import walk_dance
     from dancesynth.eval.evaluate import mocap_reference
 
     rows = []
@@ -103,6 +115,7 @@ def library_rows(music, db, bars: int) -> list[dict]:
         own = mm.transition_jumps(original, original.provenance.transition_times_s) \
             if len(original.provenance.transition_times_s) else np.zeros(0)
         steps = {tuple(s) for s in one_frame_steps(original).tolist()}
+        walk = walk_dance(style, music, seed=1)   # the baseline: a random walk on the style's graph
         asks = [{"seed": 100 + i, "at": t} for i, t in enumerate(SPAN_STARTS_S)]
         if engine == "streaming":
             other = next(n for n, s in db.styles.items()
@@ -125,6 +138,9 @@ def library_rows(music, db, bars: int) -> list[dict]:
             row["hard_cut_join_jump_vs_mocap_p99"] = measure(original, cut, record["start_s"], record["end_s"], p99,
                                                              steps)["join_jump_vs_mocap_p99"]
             row["own_transitions_worst_vs_mocap_p99"] = float(own.max()) / p99 if own.size else None
+            row["visible_accents_x_chance"] = {
+                name: span_accents(c, music, record["start_s"], record["end_s"], ref)
+                for name, c in (("edited", edited), ("original", original), ("random_walk", walk))}
             rows.append(row)
             print(f"  {engine:12s} {row['span_s'][0]:6.1f}-{row['span_s'][1]:6.1f} s {row['ask']}: "
                   f"{took * 1000:6.0f} ms, join {row['join_jump_vs_mocap_p99']:.2f} "
@@ -185,7 +201,8 @@ def main(argv=None) -> int:
     out = {"song_s": music.duration_s, "bars": args.bars, "analysis_s": analysis_s, "edits": rows, "server": server,
            "machine": {"cpus": __import__("os").cpu_count(), "processor": platform.machine()}}
     print(f"\n{'engine':13s} {'edits':>5s} {'ms median':>9s} {'ms max':>7s} {'join/p99 max':>12s} "
-          f"{'hard cut max':>12s} {'own worst':>9s} {'new steps':>9s} {'skate x':>7s} {'rest kept':>9s}")
+          f"{'hard cut max':>12s} {'own worst':>9s} {'new steps':>9s} {'skate x':>7s} {'rest kept':>9s} "
+          f"{'accents x chance: edited / original / random walk (median)':>58s}")
     for engine in ENGINES:
         r = [x for x in rows if x["engine"] == engine]
         ms = np.array([x["redance_s"] for x in r]) * 1000
@@ -195,7 +212,9 @@ def main(argv=None) -> int:
               f"{max(x['hard_cut_join_jump_vs_mocap_p99'] for x in r):12.2f} "
               f"{own if own is None else round(own, 2)!s:>9s} {sum(x['new_one_frame_steps'] for x in r):9d} "
               f"{np.median([x['foot_skate_vs_original'] for x in r]):7.2f} "
-              f"{str(all(x['outside_unchanged'] for x in r)):>9s}")
+              f"{str(all(x['outside_unchanged'] for x in r)):>9s} "
+              + " / ".join(f"{np.median([x['visible_accents_x_chance'][k] for x in r]):.2f}"
+                           for k in ("edited", "original", "random_walk")))
     trips = np.array(server["redance_round_trip_s"])
     print(f"\nserver (mannequin, {server['frames']} frames): first dance {server['dance_s']:.1f} s; re-dance round "
           f"trip median {np.median(trips) * 1000:.0f} ms, max {trips.max() * 1000:.0f} ms (target < 1000 ms)")
